@@ -1,0 +1,50 @@
+#include "plugins/replay/replay_source.h"
+
+#include <thread>
+
+#include "sensor/case_config.h"
+#include "util/check.h"
+
+namespace arpos {
+
+ReplaySource::ReplaySource(std::filesystem::path sequence_dir, CameraIntrinsics intrinsics,
+                           ReplayOptions options)
+    : dir_(std::move(sequence_dir)), intrinsics_(intrinsics), options_(options) {}
+
+std::string ReplaySource::description() const { return "replay of " + dir_.string(); }
+
+void ReplaySource::OpenImpl() {
+  sequence_ = Sequence::Open(dir_);
+  next_ = 0;
+  start_wall_ = std::chrono::steady_clock::now();
+  start_timestamp_s_ = sequence_.size() ? sequence_.timestamp_s(0) : 0;
+}
+
+bool ReplaySource::NextImpl(RgbdFrame* frame) {
+  if (next_ >= sequence_.size()) return false;
+  if (options_.realtime) {
+    const double offset_s = sequence_.timestamp_s(next_) - start_timestamp_s_;
+    std::this_thread::sleep_until(start_wall_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                    std::chrono::duration<double>(offset_s)));
+  }
+  *frame = sequence_.LoadFrame(next_, intrinsics_);
+  next_ += 1 + std::max(0, options_.frame_step);
+  return true;
+}
+
+std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& uri) {
+  const std::filesystem::path dir = std::filesystem::absolute(uri).lexically_normal();
+  if (!std::filesystem::is_directory(dir)) {
+    ARPOS_INPUT_ERROR(dir.string() << ": sequence folder does not exist");
+  }
+  std::filesystem::path probe = dir;
+  for (int up = 0; up < 3 && probe.has_parent_path(); ++up) {
+    probe = probe.parent_path();
+    if (std::filesystem::exists(probe / "case.yaml")) {
+      return std::make_unique<ReplaySource>(dir, LoadCaseConfig(probe / "case.yaml").camera);
+    }
+  }
+  ARPOS_INPUT_ERROR(dir.string() << ": no case.yaml found above this sequence folder");
+}
+
+}  // namespace arpos

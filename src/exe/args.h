@@ -1,0 +1,35 @@
+#pragma once
+/// Minimal command-line parsing for subcommands: positionals, `--flag`,
+/// `--key value` and `--key=value`. Unknown options are an error that names
+/// the option; every subcommand prints its usage on --help.
+
+#include <map>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace arpos {
+
+class Args {
+ public:
+  /// `value_options`: options that take a value; `flag_options`: those that don't.
+  /// Throws InputError for an unknown option or a missing value.
+  Args(const std::vector<std::string>& argv, const std::set<std::string>& value_options,
+       const std::set<std::string>& flag_options);
+
+  const std::vector<std::string>& positional() const { return positional_; }
+  bool Has(const std::string& option) const { return values_.count(option) > 0; }
+  std::optional<std::string> Get(const std::string& option) const;
+  std::string GetOr(const std::string& option, const std::string& fallback) const;
+  /// Throws InputError naming the option if absent.
+  std::string Require(const std::string& option) const;
+  double GetDouble(const std::string& option, double fallback) const;
+  long long GetInt(const std::string& option, long long fallback) const;
+
+ private:
+  std::vector<std::string> positional_;
+  std::map<std::string, std::string> values_;
+};
+
+}  // namespace arpos

@@ -1,0 +1,60 @@
+#include "sensor/camera_source.h"
+
+#include <sstream>
+
+#include "util/check.h"
+
+namespace arpos {
+
+void CameraSource::Open() {
+  if (open_) return;
+  OpenImpl();
+  open_ = true;
+  frames_delivered_ = 0;
+}
+
+bool CameraSource::Next(RgbdFrame* frame) {
+  ARPOS_CHECK(frame != nullptr, "Next() needs a frame to fill");
+  if (!open_) return false;
+  if (!NextImpl(frame)) return false;
+  ++frames_delivered_;
+  return true;
+}
+
+void CameraSource::Close() {
+  if (!open_) return;
+  CloseImpl();
+  open_ = false;
+}
+
+CameraSourceRegistry& CameraSourceRegistry::Global() {
+  static CameraSourceRegistry registry;
+  return registry;
+}
+
+void CameraSourceRegistry::Register(const std::string& kind, const std::string& help,
+                                    Factory factory) {
+  ARPOS_CHECK(!kind.empty() && factory, "a camera source needs a kind and a factory");
+  entries_[kind] = {help, std::move(factory)};
+}
+
+std::unique_ptr<CameraSource> CameraSourceRegistry::Create(const std::string& spec) const {
+  const size_t colon = spec.find(':');
+  const std::string kind = spec.substr(0, colon);
+  const std::string uri = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  const auto it = entries_.find(kind);
+  if (it == entries_.end()) {
+    std::ostringstream known;
+    for (const auto& [name, entry] : entries_) known << " " << name;
+    ARPOS_INPUT_ERROR("unknown camera source '" << kind << "'; known sources:" << known.str());
+  }
+  return it->second.factory(uri);
+}
+
+std::vector<std::pair<std::string, std::string>> CameraSourceRegistry::Kinds() const {
+  std::vector<std::pair<std::string, std::string>> kinds;
+  for (const auto& [name, entry] : entries_) kinds.emplace_back(name, entry.help);
+  return kinds;
+}
+
+}  // namespace arpos

@@ -1,0 +1,22 @@
+#pragma once
+/// One RGB-D frame as a camera source delivers it.
+
+#include <opencv2/core.hpp>
+#include <string>
+
+namespace arpos {
+
+struct RgbdFrame {
+  int index = -1;            ///< 0-based index in its sequence
+  double timestamp_s = 0;    ///< colour timestamp
+  cv::Mat color;             ///< CV_8UC3, BGR
+  cv::Mat depth;             ///< CV_16UC1, registered to colour, 0 = no reading
+  double depth_scale = 1000; ///< depth units per metre
+
+  /// Depth in metres at pixel (u, v); 0 if there is no reading.
+  double DepthM(int u, int v) const {
+    return depth.at<uint16_t>(v, u) / depth_scale;
+  }
+};
+
+}  // namespace arpos

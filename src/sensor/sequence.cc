@@ -1,0 +1,93 @@
+#include "sensor/sequence.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "util/check.h"
+
+namespace arpos {
+
+Sequence Sequence::Open(const std::filesystem::path& folder) {
+  if (!std::filesystem::is_directory(folder)) {
+    ARPOS_INPUT_ERROR(folder.string() << ": sequence folder does not exist");
+  }
+  Sequence seq;
+  seq.folder_ = folder;
+  for (const char* list : {"rgb.txt", "depth.txt"}) {
+    if (!std::filesystem::exists(folder / list)) {
+      ARPOS_INPUT_ERROR((folder / list).string() << ": missing (every sequence needs rgb.txt and depth.txt)");
+    }
+  }
+  const auto rgb = ReadImageList(folder / "rgb.txt");
+  const auto depth = ReadImageList(folder / "depth.txt");
+  std::vector<double> rgb_t, depth_t;
+  for (const auto& e : rgb) rgb_t.push_back(e.timestamp_s);
+  for (const auto& e : depth) depth_t.push_back(e.timestamp_s);
+  const auto pairs = AssociateTimestamps(rgb_t, depth_t, kFrameAssociationS);
+  if (pairs.empty()) {
+    ARPOS_INPUT_ERROR(folder.string() << ": no colour image has a depth image within "
+                                      << kFrameAssociationS << " s (" << rgb.size()
+                                      << " colour, " << depth.size() << " depth entries)");
+  }
+  for (const auto& [i, j] : pairs) {
+    seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, depth[j].relative_path});
+  }
+  seq.unmatched_color_ = rgb.size() - pairs.size();
+  return seq;
+}
+
+RgbdFrame Sequence::LoadFrame(size_t i, const CameraIntrinsics& intrinsics) const {
+  ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
+  RgbdFrame frame;
+  frame.index = static_cast<int>(i);
+  frame.timestamp_s = frames_[i].timestamp_s;
+  frame.depth_scale = intrinsics.depth_scale;
+  const auto color_file = color_path(i);
+  const auto depth_file = depth_path(i);
+  if (!std::filesystem::exists(color_file)) ARPOS_INPUT_ERROR(color_file.string() << ": missing colour image");
+  if (!std::filesystem::exists(depth_file)) ARPOS_INPUT_ERROR(depth_file.string() << ": missing depth image");
+  frame.color = cv::imread(color_file.string(), cv::IMREAD_UNCHANGED);
+  if (frame.color.empty()) ARPOS_INPUT_ERROR(color_file.string() << ": unreadable or corrupt image");
+  if (frame.color.depth() != CV_8U) {
+    ARPOS_INPUT_ERROR(color_file.string() << ": colour must be 8-bit per channel");
+  }
+  if (frame.color.channels() == 1) {
+    cv::Mat bgr;
+    cv::cvtColor(frame.color, bgr, cv::COLOR_GRAY2BGR);
+    frame.color = bgr;
+  } else if (frame.color.channels() == 4) {
+    cv::Mat bgr;
+    cv::cvtColor(frame.color, bgr, cv::COLOR_BGRA2BGR);
+    frame.color = bgr;
+  }
+  frame.depth = cv::imread(depth_file.string(), cv::IMREAD_UNCHANGED);
+  if (frame.depth.empty()) ARPOS_INPUT_ERROR(depth_file.string() << ": unreadable or corrupt image");
+  if (frame.depth.type() != CV_16UC1) {
+    ARPOS_INPUT_ERROR(depth_file.string() << ": depth must be 16-bit single-channel, got "
+                                          << frame.depth.channels() << " channel(s) of "
+                                          << (frame.depth.depth() == CV_8U ? "8" : "non-16")
+                                          << "-bit");
+  }
+  for (const auto& [file, image] : {std::pair{color_file, frame.color}, std::pair{depth_file, frame.depth}}) {
+    if (image.cols != intrinsics.width || image.rows != intrinsics.height) {
+      ARPOS_INPUT_ERROR(file.string() << ": image is " << image.cols << "x" << image.rows
+                                      << " but case.yaml camera is " << intrinsics.width << "x"
+                                      << intrinsics.height);
+    }
+  }
+  return frame;
+}
+
+std::optional<std::vector<StampedPose>> Sequence::CameraGroundTruth() const {
+  const auto path = folder_ / "groundtruth.txt";
+  if (!std::filesystem::exists(path)) return std::nullopt;
+  return ReadTrajectory(path);
+}
+
+std::optional<std::vector<StampedPose>> Sequence::BodyGroundTruth() const {
+  const auto path = folder_ / "body_groundtruth.txt";
+  if (!std::filesystem::exists(path)) return std::nullopt;
+  return ReadTrajectory(path);
+}
+
+}  // namespace arpos

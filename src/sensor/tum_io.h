@@ -1,0 +1,53 @@
+#pragma once
+/// TUM RGB-D files (DATASET.md): image lists and trajectories.
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "geometry/rigid3.h"
+
+namespace arpos {
+
+/// One line of rgb.txt / depth.txt: "timestamp relative/path.png".
+struct ImageListEntry {
+  double timestamp_s = 0;
+  std::string relative_path;
+  int line = 0;  ///< 1-based line in the list file, for messages
+};
+
+/// Reads a TUM image list; '#' lines and blank lines are skipped. Throws
+/// InputError naming the file and line for a malformed line. Timestamps are
+/// not required to be monotonic here (case checks report that).
+std::vector<ImageListEntry> ReadImageList(const std::filesystem::path& path);
+void WriteImageList(const std::filesystem::path& path, const std::vector<ImageListEntry>& entries,
+                    const std::string& header_comment);
+
+/// One pose of a TUM trajectory: `room_from_x` maps the moving frame x into the room.
+struct StampedPose {
+  double timestamp_s = 0;
+  Rigid3d room_from_x;
+};
+
+/// Reads "timestamp tx ty tz qx qy qz qw" lines. Throws InputError naming file
+/// and line for a malformed line or a quaternion far from unit norm (|q| not
+/// within 1e-3 of 1; smaller deviations are normalised).
+std::vector<StampedPose> ReadTrajectory(const std::filesystem::path& path);
+/// Writes atomically with full precision (timestamps to 1e-6 s, 9 digits).
+void WriteTrajectory(const std::filesystem::path& path, const std::vector<StampedPose>& poses,
+                     const std::string& header_comment = "");
+
+/// Reads a 4x4 row-major matrix (16 numbers, whitespace separated, '#'
+/// comments allowed), e.g. target_pose.txt. Throws InputError naming the file.
+Eigen::Matrix4d ReadMatrix4(const std::filesystem::path& path);
+void WriteMatrix4(const std::filesystem::path& path, const Eigen::Matrix4d& matrix,
+                  const std::string& header_comment = "");
+
+/// Pairs of indices (i into a, j into b) whose timestamps differ by at most
+/// `max_difference_s`, each index used at most once, greedy by smallest
+/// difference (the TUM associate.py rule). Sorted by i.
+std::vector<std::pair<size_t, size_t>> AssociateTimestamps(const std::vector<double>& a,
+                                                           const std::vector<double>& b,
+                                                           double max_difference_s);
+
+}  // namespace arpos

@@ -1,0 +1,85 @@
+// Runs the real `arpos` executable as a user would.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+
+#include "sensor/test_case_builder.h"
+#include "sensor/tum_io.h"
+#include "util/file.h"
+
+namespace arpos {
+namespace {
+
+struct Result {
+  int status = -1;
+  std::string output;  // stdout and stderr
+};
+
+Result RunArpos(const std::string& args) {
+  const std::string command = std::string(ARPOS_EXECUTABLE) + " " + args + " 2>&1";
+  Result result;
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return result;
+  std::array<char, 4096> buffer;
+  size_t n;
+  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) result.output.append(buffer.data(), n);
+  const int status = pclose(pipe);
+  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+TEST(Cli, HelpListsSubcommands) {
+  const Result r = RunArpos("--help");
+  EXPECT_EQ(r.status, 0);
+  for (const char* command : {"check", "evaluate", "run-case"}) {
+    EXPECT_NE(r.output.find(std::string("  ") + command), std::string::npos) << r.output;
+  }
+  EXPECT_EQ(RunArpos("no-such-command").status, 2);
+  EXPECT_EQ(RunArpos("check --no-such-option x").status, 2);
+}
+
+TEST(Cli, CheckPassesAndFails) {
+  TempDir dir;
+  testing::WriteTinyCase(dir.path() / "case");
+  Result r = RunArpos("check " + (dir.path() / "case").string());
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("OK"), std::string::npos);
+  std::filesystem::remove(dir.path() / "case" / "room" / "depth" / "2.png");
+  WriteFileAtomic(dir.path() / "case" / "target_pose.txt", "1 2 3\n");
+  r = RunArpos("check " + (dir.path() / "case").string());
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("room/depth/2.png: missing"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("target_pose.txt: expected a 4x4 matrix"), std::string::npos) << r.output;
+}
+
+TEST(Cli, EvaluateIdenticalAndPerturbed) {
+  TempDir dir;
+  std::vector<StampedPose> gt, est;
+  for (int i = 0; i < 10; ++i) {
+    const Rigid3d pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * i, Eigen::Vector3d::UnitY())),
+                       Eigen::Vector3d(i * 0.01, 0.5, 1.0));
+    gt.push_back({i * 0.1, pose});
+    // 2 mm along the moving frame's z; frame 9 missing (lost).
+    if (i < 9) est.push_back({i * 0.1 + 0.001, pose * Rigid3d(Eigen::Quaterniond::Identity(), {0, 0, 0.002})});
+  }
+  WriteTrajectory(dir.path() / "gt.txt", gt);
+  WriteTrajectory(dir.path() / "est.txt", est);
+  Result r = RunArpos("evaluate --gt " + (dir.path() / "gt.txt").string() + " --est " +
+                 (dir.path() / "gt.txt").string() + " --json");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("\"translation_mm\": {\"mean\": 0.000000"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\"lost_percent\": 0.0000"), std::string::npos) << r.output;
+  r = RunArpos("evaluate --gt " + (dir.path() / "gt.txt").string() + " --est " +
+          (dir.path() / "est.txt").string() + " --json");
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("\"translation_mm\": {\"mean\": 2.000000"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("\"lost_percent\": 10.0000"), std::string::npos) << r.output;
+  r = RunArpos("evaluate --gt " + (dir.path() / "missing.txt").string() + " --est x");
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("missing.txt: cannot open"), std::string::npos) << r.output;
+}
+
+}  // namespace
+}  // namespace arpos
