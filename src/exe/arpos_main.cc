@@ -19,6 +19,9 @@
 #ifdef ARPOS_HAVE_GUI
 #include "exe/cmd_gui.h"
 #endif
+#ifdef ARPOS_HAVE_IMPORT_MODEL
+#include "exe/cmd_import_model.h"
+#endif
 
 namespace {
 
@@ -35,6 +38,10 @@ const std::vector<Command>& Commands() {
 #endif
       {"run-case", "run every stage on a case folder and store the results", arpos::RunRunCaseCommand},
       {"check", "validate a case folder and report every problem", arpos::RunCheckCommand},
+#ifdef ARPOS_HAVE_IMPORT_MODEL
+      {"import-model", "import the reference body surface (mesh, CT series, RTSTRUCT)",
+       arpos::RunImportModelCommand},
+#endif
 #ifdef ARPOS_HAVE_SIMULATE
       {"simulate", "write a synthetic case folder with exact ground truth", arpos::RunSimulateCommand},
 #endif
