@@ -1,0 +1,89 @@
+#include "exe/cmd_store.h"
+
+#include <iostream>
+
+#include "store/describe.h"
+#include "store/sqlite_database.h"
+#include "store/store_path.h"
+#include "util/check.h"
+#include "util/string_util.h"
+
+namespace arpos {
+namespace {
+
+constexpr const char* kUsage =
+    "Usage: arpos store <command> [options]\n"
+    "\n"
+    "Commands:\n"
+    "  info [--store DB]   Print a summary of the session store: schema version,\n"
+    "                      rows per table, latest plans and sessions.\n"
+    "\n"
+    "Options:\n"
+    "  --store DB          Store file. Default: $ARPOS_STORE if set, else\n"
+    "                      ./arpos_store.db\n"
+    "  -h, --help          Show this help.\n";
+
+bool IsHelp(const std::string& arg) { return arg == "-h" || arg == "--help"; }
+
+int RunInfo(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+  std::string store_path = DefaultStorePath();
+  for (std::size_t i = 1; i < args.size(); ++i) {
+    const std::string& arg = args[i];
+    if (IsHelp(arg)) {
+      out << kUsage;
+      return 0;
+    } else if (arg == "--store") {
+      if (i + 1 >= args.size()) {
+        err << "arpos store info: --store needs a file name\n" << kUsage;
+        return 2;
+      }
+      store_path = args[++i];
+    } else if (StartsWith(arg, "--store=")) {
+      store_path = arg.substr(std::string("--store=").size());
+    } else {
+      err << "arpos store info: unknown argument '" << arg << "'\n" << kUsage;
+      return 2;
+    }
+  }
+  if (store_path.empty()) {
+    err << "arpos store info: the store path is empty\n";
+    return 2;
+  }
+
+  SqliteOpenOptions options;
+  options.create_if_missing = false;  // `info` must not leave a new empty store behind
+  const std::unique_ptr<SqliteDatabase> database = SqliteDatabase::Open(store_path, options);
+  out << DescribeStore(*database);
+  return 0;
+}
+
+}  // namespace
+
+int RunStoreCommandWithOutput(const std::vector<std::string>& args, std::ostream& out,
+                              std::ostream& err) {
+  if (args.empty()) {
+    err << "arpos store: missing command\n" << kUsage;
+    return 2;
+  }
+  if (IsHelp(args[0])) {
+    out << kUsage;
+    return 0;
+  }
+  try {
+    if (args[0] == "info") return RunInfo(args, out, err);
+  } catch (const InputError& e) {
+    err << "arpos store " << args[0] << ": error: " << e.what() << "\n";
+    return 2;
+  } catch (const std::exception& e) {
+    err << "arpos store " << args[0] << ": error: " << e.what() << "\n";
+    return 1;
+  }
+  err << "arpos store: unknown command '" << args[0] << "'\n" << kUsage;
+  return 2;
+}
+
+int RunStoreCommand(const std::vector<std::string>& args) {
+  return RunStoreCommandWithOutput(args, std::cout, std::cerr);
+}
+
+}  // namespace arpos

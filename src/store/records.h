@@ -1,0 +1,284 @@
+#pragma once
+/// Plain records the session store reads and writes (src/store/database.h).
+///
+/// One struct per table of schema/NNNN_*.sql. Records are values: no
+/// behaviour, no database handles. Units are in the names (SI inside; mm and
+/// degrees only for the corrections a person reads); every pose is a Rigid3d
+/// named by what it maps (see geometry/rigid3.h):
+///   room frame    frame of the room origin marker (DATASET.md)
+///   model frame   coordinates of the reference model file
+///   body frame    frame of a session's body scan: the body marker map and the
+///                 reconstruction built from the same scan share it
+/// Times are UTC milliseconds since 1970-01-01 (`*_unix_ms`). On Add*, a
+/// created/started time of 0 means "now".
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "geometry/rigid3.h"
+
+namespace arpos {
+
+/// A row id typed by the table it belongs to, so a SessionId cannot be passed
+/// where a PlanId is expected. 0 is "no id" (SQLite row ids start at 1).
+template <typename Tag>
+class RowId {
+ public:
+  constexpr RowId() = default;
+  constexpr explicit RowId(std::int64_t value) : value_(value) {}
+  constexpr std::int64_t value() const { return value_; }
+  constexpr bool valid() const { return value_ > 0; }
+  friend constexpr bool operator==(RowId a, RowId b) { return a.value_ == b.value_; }
+  friend constexpr bool operator!=(RowId a, RowId b) { return a.value_ != b.value_; }
+  friend constexpr bool operator<(RowId a, RowId b) { return a.value_ < b.value_; }
+
+ private:
+  std::int64_t value_ = 0;
+};
+
+using PatientId = RowId<struct PatientIdTag>;
+using PlanId = RowId<struct PlanIdTag>;
+using SessionId = RowId<struct SessionIdTag>;
+using RecordingId = RowId<struct RecordingIdTag>;
+using RoomMapId = RowId<struct RoomMapIdTag>;
+using BodyMarkerMapId = RowId<struct BodyMarkerMapIdTag>;
+using ReconstructionId = RowId<struct ReconstructionIdTag>;
+using AlignmentId = RowId<struct AlignmentIdTag>;
+using TrackingRunId = RowId<struct TrackingRunIdTag>;
+using AuditId = RowId<struct AuditIdTag>;
+
+// ---------------------------------------------------------------- geometry data
+
+/// A point cloud as stored (blob_codec.h): positions in metres in the frame the
+/// owning record names; `normals` (unit vectors) and `colors` (RGB) are either
+/// empty or exactly one per point.
+struct StoredPointCloud {
+  std::vector<Eigen::Vector3f> points;
+  std::vector<Eigen::Vector3f> normals;
+  std::vector<std::array<std::uint8_t, 3>> colors;  ///< R, G, B
+};
+
+/// A triangle mesh as stored: vertex positions in metres; each face holds
+/// three vertex indices, counter-clockwise seen from outside.
+struct StoredTriangleMesh {
+  std::vector<Eigen::Vector3f> vertices;
+  std::vector<std::array<std::uint32_t, 3>> faces;
+};
+
+/// Row-major bytes, e.g. one binary feature descriptor (ORB: 32 bytes) per row.
+using ByteMatrix = Eigen::Matrix<std::uint8_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// ---------------------------------------------------------------- planning
+
+struct PatientRecord {
+  PatientId id;             ///< set by the store
+  std::string external_id;  ///< hospital patient id; unique, non-empty
+  std::string display_name;
+  std::int64_t created_unix_ms = 0;
+};
+
+/// A treatment plan: the reference body surface and where it must be in the room.
+struct PlanRecord {
+  PlanId id;  ///< set by the store
+  PatientId patient_id;
+  std::string name;                    ///< non-empty
+  std::string reference_model_name;    ///< source file name, for people
+  StoredTriangleMesh reference_model;  ///< model frame, metres
+  Rigid3d room_from_model_target;      ///< desired pose of the model in the room
+  std::int64_t created_unix_ms = 0;
+};
+
+/// One line of a plan listing (no blobs).
+struct PlanSummary {
+  PlanId id;
+  PatientId patient_id;
+  std::string patient_external_id;
+  std::string name;
+  std::int64_t created_unix_ms = 0;
+  std::int64_t num_sessions = 0;
+};
+
+/// A room marker in the map: its 4 corners in the room frame (metres, OpenCV
+/// ArUco corner order: top-left, top-right, bottom-right, bottom-left of the
+/// printed face) and its mean reprojection residual over the room sequence.
+struct RoomMapMarker {
+  int marker_id = 0;
+  std::array<Eigen::Vector3d, 4> corners_in_room;
+  double residual_px = 0;
+  int num_observations = 0;
+};
+
+/// The planning-stage map of the treatment room, expressed in the room frame.
+struct RoomMapRecord {
+  RoomMapId id;  ///< set by the store
+  PlanId plan_id;
+  std::optional<RecordingId> recording_id;  ///< the room sequence it was built from
+  int origin_marker_id = 0;                 ///< defines the room frame
+  double marker_size_m = 0;                 ///< > 0
+  std::vector<RoomMapMarker> markers;       ///< marker ids unique
+  double mean_residual_px = 0;              ///< over all markers and views
+  double max_residual_px = 0;               ///< >= mean_residual_px
+  /// Keypoint landmarks: positions in the room frame and, row for row, their
+  /// descriptors. Both empty if the map has no keypoint layer.
+  StoredPointCloud landmarks_in_room;
+  ByteMatrix landmark_descriptors;
+  std::int64_t created_unix_ms = 0;
+};
+
+// ---------------------------------------------------------------- session
+
+enum class SessionStatus { kOpen, kCompleted, kAborted };
+
+/// One treatment session (fraction) of a plan.
+struct SessionRecord {
+  SessionId id;  ///< set by the store
+  PlanId plan_id;
+  int fraction = 1;  ///< >= 1
+  std::string operator_name;
+  std::int64_t started_unix_ms = 0;
+  SessionStatus status = SessionStatus::kOpen;
+  std::optional<std::int64_t> ended_unix_ms;  ///< set when no longer open
+  std::string notes;
+};
+
+enum class RecordingKind { kRoom, kBodyScan, kTracking };
+
+/// Pinhole model of a recording; the same fields as sensor/intrinsics.h
+/// CameraIntrinsics (the store does not depend on the sensor layer).
+struct RecordingIntrinsics {
+  int width = 0;
+  int height = 0;
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  std::array<double, 5> distortion{{0, 0, 0, 0, 0}};  ///< OpenCV k1 k2 p1 p2 k3
+  double depth_scale = 1000.0;                        ///< depth units per metre
+};
+
+/// An RGB-D sequence on disk (DATASET.md layout). A kRoom recording belongs to
+/// a plan; kBodyScan and kTracking recordings belong to a session: exactly one
+/// of plan_id and session_id is set, matching the kind.
+struct RecordingRecord {
+  RecordingId id;  ///< set by the store
+  std::optional<PlanId> plan_id;
+  std::optional<SessionId> session_id;
+  RecordingKind kind = RecordingKind::kRoom;
+  std::string name;  ///< e.g. the tracking/<name> folder name
+  std::string path;  ///< sequence folder, non-empty
+  std::int64_t frame_count = 0;
+  RecordingIntrinsics intrinsics;
+  std::int64_t created_unix_ms = 0;
+};
+
+/// A body marker in the body frame, with its residual over the body scan.
+struct BodyMarker {
+  int marker_id = 0;
+  Rigid3d body_from_marker;
+  double residual_px = 0;
+  int num_observations = 0;
+};
+
+struct BodyMarkerMapRecord {
+  BodyMarkerMapId id;  ///< set by the store
+  SessionId session_id;
+  std::optional<RecordingId> recording_id;  ///< the body scan
+  double marker_size_m = 0;                 ///< > 0
+  std::vector<BodyMarker> markers;          ///< marker ids unique
+  double mean_residual_px = 0;
+  double max_residual_px = 0;  ///< >= mean_residual_px
+  std::int64_t created_unix_ms = 0;
+};
+
+/// The body surface reconstructed from a scan, in the body frame.
+struct ReconstructionRecord {
+  ReconstructionId id;  ///< set by the store
+  SessionId session_id;
+  std::optional<RecordingId> recording_id;
+  StoredPointCloud cloud;
+  std::optional<StoredTriangleMesh> mesh;
+  std::int64_t num_frames_used = 0;
+  double voxel_size_m = 0;  ///< 0: not voxelised
+  std::int64_t created_unix_ms = 0;
+};
+
+enum class AlignmentMethod { kManual, kIcp, kAutomatic };
+
+/// The reference model registered to a reconstruction. A refinement names the
+/// alignment it started from in `parent_alignment_id`.
+struct AlignmentRecord {
+  AlignmentId id;  ///< set by the store
+  ReconstructionId reconstruction_id;
+  std::optional<AlignmentId> parent_alignment_id;
+  AlignmentMethod method = AlignmentMethod::kManual;
+  Rigid3d reconstruction_from_model;
+  double fitness = 0;  ///< inlier fraction in [0, 1]
+  double rmse_m = 0;   ///< inlier RMSE, >= 0
+  std::int64_t num_inliers = 0;
+  std::string options;  ///< stage options as YAML, for the record
+  std::int64_t created_unix_ms = 0;
+};
+
+// ---------------------------------------------------------------- tracking
+
+struct TrackingRunRecord {
+  TrackingRunId id;  ///< set by the store
+  SessionId session_id;
+  std::optional<AlignmentId> alignment_id;  ///< the alignment tracking started from
+  std::optional<RecordingId> recording_id;  ///< the sequence, if replayed or recorded
+  std::string options;                      ///< stage options as YAML
+  double tolerance_translation_mm = 3.0;    ///< > 0
+  double tolerance_rotation_deg = 2.0;      ///< > 0
+  std::int64_t started_unix_ms = 0;
+};
+
+enum class TrackingFrameStatus { kInTolerance, kOutOfTolerance, kLost };
+
+/// The 6-DoF couch correction shown to the operator, about the room axes.
+struct Correction6Dof {
+  Eigen::Vector3d translation_mm = Eigen::Vector3d::Zero();
+  Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();
+};
+
+/// One processed frame. kLost <=> no estimate: room_from_model and correction
+/// are empty exactly when status is kLost.
+struct TrackingFrameRecord {
+  std::int64_t frame_index = 0;  ///< >= 0, unique within a run
+  double timestamp_s = 0;        ///< sequence timestamp
+  TrackingFrameStatus status = TrackingFrameStatus::kLost;
+  std::optional<Rigid3d> room_from_model;  ///< estimated model pose in the room
+  std::optional<Correction6Dof> correction;
+};
+
+// ---------------------------------------------------------------- audit
+
+/// One line of the append-only audit log.
+struct AuditEntry {
+  AuditId id;  ///< set by the store
+  std::int64_t time_unix_ms = 0;
+  std::string actor;    ///< who (user or program), non-empty
+  std::string action;   ///< what, e.g. "approve_alignment", non-empty
+  std::string entity;   ///< on what, e.g. "alignment:7"
+  std::string details;  ///< free text
+};
+
+const char* ToString(SessionStatus status);
+const char* ToString(RecordingKind kind);
+const char* ToString(AlignmentMethod method);
+const char* ToString(TrackingFrameStatus status);
+/// Inverses of ToString; throw arpos::Error naming the unknown text.
+SessionStatus ParseSessionStatus(const std::string& text);
+RecordingKind ParseRecordingKind(const std::string& text);
+AlignmentMethod ParseAlignmentMethod(const std::string& text);
+TrackingFrameStatus ParseTrackingFrameStatus(const std::string& text);
+
+}  // namespace arpos
+
+template <typename Tag>
+struct std::hash<arpos::RowId<Tag>> {
+  std::size_t operator()(arpos::RowId<Tag> id) const noexcept {
+    return std::hash<std::int64_t>()(id.value());
+  }
+};

@@ -1,0 +1,832 @@
+#include "store/sqlite_database.h"
+
+#include <sqlite3.h>
+
+#include <chrono>
+#include <filesystem>
+
+#include "store/blob_codec.h"
+#include "store/migrator.h"
+#include "store/sqlite_util.h"
+#include "util/logging.h"
+
+namespace arpos {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::int64_t NowUnixMs() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::int64_t OrNow(std::int64_t unix_ms) { return unix_ms != 0 ? unix_ms : NowUnixMs(); }
+
+// SQLite reads LIMIT -1 as "no limit".
+std::int64_t SqlLimit(std::size_t limit) {
+  return limit == 0 ? -1 : static_cast<std::int64_t>(limit);
+}
+
+std::string Context(const char* column, const char* owner, std::int64_t id) {
+  return std::string(column) + " of " + owner + " " + std::to_string(id);
+}
+
+template <typename Id>
+std::optional<Id> OptionalId(const SqliteStatement& s, int column) {
+  if (s.ColumnIsNull(column)) return std::nullopt;
+  return Id(s.ColumnInt64(column));
+}
+
+struct SqliteCloser {
+  void operator()(sqlite3* db) const { sqlite3_close(db); }
+};
+
+// 4 corners x (x, y, z), one corner per row.
+Blob EncodeCorners(const std::array<Eigen::Vector3d, 4>& corners) {
+  Eigen::MatrixXd matrix(4, 3);
+  for (int i = 0; i < 4; ++i) matrix.row(i) = corners[i].transpose();
+  return EncodeMatrix(matrix);
+}
+
+std::array<Eigen::Vector3d, 4> DecodeCorners(const Blob& blob, const std::string& context) {
+  const Eigen::MatrixXd matrix = DecodeMatrix(blob, context);
+  if (matrix.rows() != 4 || matrix.cols() != 3) {
+    throw CorruptBlobError(context + ": corrupt blob: marker corners must be 4x3, found " +
+                           std::to_string(matrix.rows()) + "x" + std::to_string(matrix.cols()));
+  }
+  std::array<Eigen::Vector3d, 4> corners;
+  for (int i = 0; i < 4; ++i) corners[i] = matrix.row(i).transpose();
+  return corners;
+}
+
+// Column lists shared by the Get and List queries of a table.
+constexpr const char* kPatientColumns =
+    "SELECT patient_id, external_id, display_name, created_unix_ms FROM patients ";
+constexpr const char* kSessionColumns =
+    "SELECT session_id, plan_id, fraction, operator_name, started_unix_ms, status, "
+    "ended_unix_ms, notes FROM sessions ";
+constexpr const char* kAlignmentColumns =
+    "SELECT alignment_id, reconstruction_id, parent_alignment_id, method, "
+    "reconstruction_from_model, fitness, rmse_m, num_inliers, options, created_unix_ms "
+    "FROM alignments ";
+
+PatientRecord ReadPatient(const SqliteStatement& s) {
+  PatientRecord patient;
+  patient.id = PatientId(s.ColumnInt64(0));
+  patient.external_id = s.ColumnText(1);
+  patient.display_name = s.ColumnText(2);
+  patient.created_unix_ms = s.ColumnInt64(3);
+  return patient;
+}
+
+SessionRecord ReadSession(const SqliteStatement& s) {
+  SessionRecord session;
+  session.id = SessionId(s.ColumnInt64(0));
+  session.plan_id = PlanId(s.ColumnInt64(1));
+  session.fraction = static_cast<int>(s.ColumnInt64(2));
+  session.operator_name = s.ColumnText(3);
+  session.started_unix_ms = s.ColumnInt64(4);
+  session.status = ParseSessionStatus(s.ColumnText(5));
+  if (!s.ColumnIsNull(6)) session.ended_unix_ms = s.ColumnInt64(6);
+  session.notes = s.ColumnText(7);
+  return session;
+}
+
+AlignmentRecord ReadAlignment(const SqliteStatement& s) {
+  AlignmentRecord alignment;
+  alignment.id = AlignmentId(s.ColumnInt64(0));
+  alignment.reconstruction_id = ReconstructionId(s.ColumnInt64(1));
+  alignment.parent_alignment_id = OptionalId<AlignmentId>(s, 2);
+  alignment.method = ParseAlignmentMethod(s.ColumnText(3));
+  alignment.reconstruction_from_model = DecodePose(
+      s.ColumnBlob(4),
+      Context("alignments.reconstruction_from_model", "alignment", alignment.id.value()));
+  alignment.fitness = s.ColumnDouble(5);
+  alignment.rmse_m = s.ColumnDouble(6);
+  alignment.num_inliers = s.ColumnInt64(7);
+  alignment.options = s.ColumnText(8);
+  alignment.created_unix_ms = s.ColumnInt64(9);
+  return alignment;
+}
+
+}  // namespace
+
+std::unique_ptr<SqliteDatabase> SqliteDatabase::Open(const std::string& path,
+                                                     const SqliteOpenOptions& options) {
+  ARPOS_CHECK(options.Check(), "invalid store options (busy_timeout_ms must be >= 0)");
+  if (path.empty()) ARPOS_INPUT_ERROR("store path is empty");
+  const bool in_memory = path == ":memory:";
+  if (!in_memory) {
+    std::error_code ec;
+    const fs::file_status status = fs::status(path, ec);
+    if (!fs::exists(status) && !options.create_if_missing) {
+      ARPOS_INPUT_ERROR("no store at " << path);
+    }
+    if (fs::is_directory(status)) ARPOS_INPUT_ERROR(path << ": is a folder, not a store file");
+  }
+
+  sqlite3* raw = nullptr;
+  const int flags = SQLITE_OPEN_READWRITE | (options.create_if_missing ? SQLITE_OPEN_CREATE : 0);
+  const int rc = sqlite3_open_v2(path.c_str(), &raw, flags, nullptr);
+  std::unique_ptr<sqlite3, SqliteCloser> db(raw);
+  if (rc != SQLITE_OK) {
+    ARPOS_INPUT_ERROR(path << ": cannot open store: "
+                           << (raw != nullptr ? sqlite3_errmsg(raw) : sqlite3_errstr(rc)));
+  }
+  ARPOS_SQLITE_CHECK(raw, sqlite3_extended_result_codes(raw, 1), "sqlite3_extended_result_codes");
+  ARPOS_SQLITE_CHECK(raw, sqlite3_busy_timeout(raw, options.busy_timeout_ms),
+                     "sqlite3_busy_timeout");
+
+  // Nothing may be written before this check: a newer store must stay
+  // byte-for-byte untouched (switching to WAL alone rewrites the header).
+  CheckStoreCompatible(raw, path);
+
+  if (!in_memory) {
+    const std::string mode = QueryText(raw, "PRAGMA journal_mode = WAL");
+    if (mode != "wal") {
+      ARPOS_WARN(path << ": could not switch the store to WAL (journal mode is '" << mode
+                      << "'); continuing with synchronous=FULL");
+    }
+  }
+  ExecSql(raw, "PRAGMA synchronous = FULL");
+  MigrateSchema(raw, path);
+  ExecSql(raw, "PRAGMA foreign_keys = ON");
+  ARPOS_CHECK(QueryInt64(raw, "PRAGMA foreign_keys") == 1,
+              "this SQLite build cannot enforce foreign keys");
+  return std::unique_ptr<SqliteDatabase>(new SqliteDatabase(db.release(), path));
+}
+
+SqliteDatabase::SqliteDatabase(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
+
+SqliteDatabase::~SqliteDatabase() {
+  statements_.clear();  // finalize before close, or close fails with SQLITE_BUSY
+  sqlite3_close(db_);
+}
+
+SqliteStatement& SqliteDatabase::Prepared(const char* sql) {
+  auto it = statements_.find(sql);
+  if (it == statements_.end()) {
+    it = statements_.emplace(sql, std::make_unique<SqliteStatement>(db_, sql)).first;
+  }
+  return *it->second;
+}
+
+std::int64_t SqliteDatabase::LastInsertRowId() const { return sqlite3_last_insert_rowid(db_); }
+
+StoreInfo SqliteDatabase::Info() {
+  StoreInfo info;
+  info.path = path_;
+  info.schema_version = ReadSchemaVersion(db_);
+  info.program_schema_version = LatestSchemaVersion();
+  info.journal_mode = QueryText(db_, "PRAGMA journal_mode");
+  info.size_bytes = QueryInt64(db_, "PRAGMA page_count") * QueryInt64(db_, "PRAGMA page_size");
+  std::vector<std::string> tables;
+  {
+    SqliteStatementGuard s(
+        Prepared("SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%' "
+                 "ORDER BY name"));
+    while (s->Step()) tables.push_back(s->ColumnText(0));
+  }
+  for (const std::string& table : tables) {
+    // Names come from sqlite_master; quoting guards against odd characters.
+    std::string quoted = "\"";
+    for (char c : table) quoted += (c == '"') ? std::string("\"\"") : std::string(1, c);
+    quoted += "\"";
+    info.table_row_counts.emplace_back(table, QueryInt64(db_, "SELECT COUNT(*) FROM " + quoted));
+  }
+  return info;
+}
+
+void SqliteDatabase::WithTransaction(const std::function<void()>& body) {
+  SqliteTransaction transaction(db_);
+  body();
+  transaction.Commit();
+}
+
+// ---------------------------------------------------------------- patients
+
+PatientId SqliteDatabase::AddPatient(const PatientRecord& patient) {
+  ARPOS_CHECK(!patient.external_id.empty(), "a patient needs a non-empty external id");
+  SqliteStatementGuard s(Prepared(
+      "INSERT INTO patients (external_id, display_name, created_unix_ms) VALUES (?1, ?2, ?3)"));
+  s->BindText(1, patient.external_id);
+  s->BindText(2, patient.display_name);
+  s->BindInt64(3, OrNow(patient.created_unix_ms));
+  s->Execute();
+  return PatientId(LastInsertRowId());
+}
+
+std::optional<PatientRecord> SqliteDatabase::GetPatient(PatientId id) {
+  static const std::string sql = std::string(kPatientColumns) + "WHERE patient_id = ?1";
+  SqliteStatementGuard s(Prepared(sql.c_str()));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  return ReadPatient(*s);
+}
+
+std::optional<PatientRecord> SqliteDatabase::FindPatient(const std::string& external_id) {
+  static const std::string sql = std::string(kPatientColumns) + "WHERE external_id = ?1";
+  SqliteStatementGuard s(Prepared(sql.c_str()));
+  s->BindText(1, external_id);
+  if (!s->Step()) return std::nullopt;
+  return ReadPatient(*s);
+}
+
+// ---------------------------------------------------------------- plans
+
+PlanId SqliteDatabase::AddPlan(const PlanRecord& plan) {
+  ARPOS_CHECK(!plan.name.empty(), "a plan needs a non-empty name");
+  const Blob mesh = EncodeTriangleMesh(plan.reference_model);
+  const Blob target = EncodePose(plan.room_from_model_target);
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO plans (patient_id, name, reference_model_name, reference_model_mesh, "
+               "room_from_model_target, created_unix_ms) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
+  s->BindId(1, plan.patient_id);
+  s->BindText(2, plan.name);
+  s->BindText(3, plan.reference_model_name);
+  s->BindBlob(4, mesh);
+  s->BindBlob(5, target);
+  s->BindInt64(6, OrNow(plan.created_unix_ms));
+  s->Execute();
+  return PlanId(LastInsertRowId());
+}
+
+std::optional<PlanRecord> SqliteDatabase::GetPlan(PlanId id) {
+  SqliteStatementGuard s(
+      Prepared("SELECT patient_id, name, reference_model_name, reference_model_mesh, "
+               "room_from_model_target, created_unix_ms FROM plans WHERE plan_id = ?1"));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  PlanRecord plan;
+  plan.id = id;
+  plan.patient_id = PatientId(s->ColumnInt64(0));
+  plan.name = s->ColumnText(1);
+  plan.reference_model_name = s->ColumnText(2);
+  plan.reference_model = DecodeTriangleMesh(
+      s->ColumnBlob(3), Context("plans.reference_model_mesh", "plan", id.value()));
+  plan.room_from_model_target =
+      DecodePose(s->ColumnBlob(4), Context("plans.room_from_model_target", "plan", id.value()));
+  plan.created_unix_ms = s->ColumnInt64(5);
+  return plan;
+}
+
+std::vector<PlanSummary> SqliteDatabase::ListPlans(std::optional<PatientId> patient,
+                                                   std::size_t limit) {
+  SqliteStatementGuard s(
+      Prepared("SELECT p.plan_id, p.patient_id, pt.external_id, p.name, p.created_unix_ms, "
+               "(SELECT COUNT(*) FROM sessions AS s WHERE s.plan_id = p.plan_id) "
+               "FROM plans AS p JOIN patients AS pt ON pt.patient_id = p.patient_id "
+               "WHERE ?1 IS NULL OR p.patient_id = ?1 "
+               "ORDER BY p.created_unix_ms DESC, p.plan_id DESC LIMIT ?2"));
+  s->BindOptionalId(1, patient);
+  s->BindInt64(2, SqlLimit(limit));
+  std::vector<PlanSummary> plans;
+  while (s->Step()) {
+    PlanSummary plan;
+    plan.id = PlanId(s->ColumnInt64(0));
+    plan.patient_id = PatientId(s->ColumnInt64(1));
+    plan.patient_external_id = s->ColumnText(2);
+    plan.name = s->ColumnText(3);
+    plan.created_unix_ms = s->ColumnInt64(4);
+    plan.num_sessions = s->ColumnInt64(5);
+    plans.push_back(std::move(plan));
+  }
+  return plans;
+}
+
+// ---------------------------------------------------------------- room maps
+
+RoomMapId SqliteDatabase::AddRoomMap(const RoomMapRecord& room_map) {
+  const std::size_t num_landmarks = room_map.landmarks_in_room.points.size();
+  ARPOS_CHECK(room_map.landmark_descriptors.rows() == 0 ||
+                  static_cast<std::size_t>(room_map.landmark_descriptors.rows()) == num_landmarks,
+              "room map has " << num_landmarks << " landmarks but "
+                              << room_map.landmark_descriptors.rows() << " descriptors");
+  SqliteTransaction transaction(db_);
+  {
+    SqliteStatementGuard s(
+        Prepared("INSERT INTO room_maps (plan_id, recording_id, origin_marker_id, marker_size_m, "
+                 "mean_residual_px, max_residual_px, landmarks_in_room, landmark_descriptors, "
+                 "created_unix_ms) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)"));
+    s->BindId(1, room_map.plan_id);
+    s->BindOptionalId(2, room_map.recording_id);
+    s->BindInt64(3, room_map.origin_marker_id);
+    s->BindDouble(4, room_map.marker_size_m);
+    s->BindDouble(5, room_map.mean_residual_px);
+    s->BindDouble(6, room_map.max_residual_px);
+    if (num_landmarks > 0) {
+      s->BindBlob(7, EncodePointCloud(room_map.landmarks_in_room));
+    } else {
+      s->BindNull(7);
+    }
+    if (room_map.landmark_descriptors.size() > 0) {
+      s->BindBlob(8, EncodeByteMatrix(room_map.landmark_descriptors));
+    } else {
+      s->BindNull(8);
+    }
+    s->BindInt64(9, OrNow(room_map.created_unix_ms));
+    s->Execute();
+  }
+  const RoomMapId id(LastInsertRowId());
+  for (const RoomMapMarker& marker : room_map.markers) {
+    SqliteStatementGuard s(Prepared(
+        "INSERT INTO room_map_markers (room_map_id, marker_id, corners_in_room, residual_px, "
+        "num_observations) VALUES (?1, ?2, ?3, ?4, ?5)"));
+    s->BindId(1, id);
+    s->BindInt64(2, marker.marker_id);
+    s->BindBlob(3, EncodeCorners(marker.corners_in_room));
+    s->BindDouble(4, marker.residual_px);
+    s->BindInt64(5, marker.num_observations);
+    s->Execute();
+  }
+  transaction.Commit();
+  return id;
+}
+
+std::optional<RoomMapRecord> SqliteDatabase::GetRoomMap(RoomMapId id) {
+  RoomMapRecord room_map;
+  {
+    SqliteStatementGuard s(
+        Prepared("SELECT plan_id, recording_id, origin_marker_id, marker_size_m, mean_residual_px, "
+                 "max_residual_px, landmarks_in_room, landmark_descriptors, created_unix_ms "
+                 "FROM room_maps WHERE room_map_id = ?1"));
+    s->BindId(1, id);
+    if (!s->Step()) return std::nullopt;
+    room_map.id = id;
+    room_map.plan_id = PlanId(s->ColumnInt64(0));
+    room_map.recording_id = OptionalId<RecordingId>(*s, 1);
+    room_map.origin_marker_id = static_cast<int>(s->ColumnInt64(2));
+    room_map.marker_size_m = s->ColumnDouble(3);
+    room_map.mean_residual_px = s->ColumnDouble(4);
+    room_map.max_residual_px = s->ColumnDouble(5);
+    if (!s->ColumnIsNull(6)) {
+      room_map.landmarks_in_room = DecodePointCloud(
+          s->ColumnBlob(6), Context("room_maps.landmarks_in_room", "room map", id.value()));
+    }
+    if (!s->ColumnIsNull(7)) {
+      room_map.landmark_descriptors = DecodeByteMatrix(
+          s->ColumnBlob(7), Context("room_maps.landmark_descriptors", "room map", id.value()));
+    }
+    room_map.created_unix_ms = s->ColumnInt64(8);
+  }
+  SqliteStatementGuard s(Prepared(
+      "SELECT marker_id, corners_in_room, residual_px, num_observations FROM room_map_markers "
+      "WHERE room_map_id = ?1 ORDER BY marker_id"));
+  s->BindId(1, id);
+  while (s->Step()) {
+    RoomMapMarker marker;
+    marker.marker_id = static_cast<int>(s->ColumnInt64(0));
+    marker.corners_in_room =
+        DecodeCorners(s->ColumnBlob(1), "room_map_markers.corners_in_room of marker " +
+                                            std::to_string(marker.marker_id) + " in room map " +
+                                            std::to_string(id.value()));
+    marker.residual_px = s->ColumnDouble(2);
+    marker.num_observations = static_cast<int>(s->ColumnInt64(3));
+    room_map.markers.push_back(marker);
+  }
+  return room_map;
+}
+
+std::optional<RoomMapId> SqliteDatabase::LatestRoomMap(PlanId plan) {
+  SqliteStatementGuard s(
+      Prepared("SELECT room_map_id FROM room_maps WHERE plan_id = ?1 "
+               "ORDER BY created_unix_ms DESC, room_map_id DESC LIMIT 1"));
+  s->BindId(1, plan);
+  if (!s->Step()) return std::nullopt;
+  return RoomMapId(s->ColumnInt64(0));
+}
+
+// ---------------------------------------------------------------- sessions
+
+SessionId SqliteDatabase::AddSession(const SessionRecord& session) {
+  ARPOS_CHECK((session.status == SessionStatus::kOpen) == !session.ended_unix_ms.has_value(),
+              "a session has an end time exactly when it is no longer open (status "
+                  << ToString(session.status) << ")");
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO sessions (plan_id, fraction, operator_name, started_unix_ms, status, "
+               "ended_unix_ms, notes) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+  s->BindId(1, session.plan_id);
+  s->BindInt64(2, session.fraction);
+  s->BindText(3, session.operator_name);
+  s->BindInt64(4, OrNow(session.started_unix_ms));
+  s->BindText(5, ToString(session.status));
+  if (session.ended_unix_ms) {
+    s->BindInt64(6, *session.ended_unix_ms);
+  } else {
+    s->BindNull(6);
+  }
+  s->BindText(7, session.notes);
+  s->Execute();
+  return SessionId(LastInsertRowId());
+}
+
+std::optional<SessionRecord> SqliteDatabase::GetSession(SessionId id) {
+  static const std::string sql = std::string(kSessionColumns) + "WHERE session_id = ?1";
+  SqliteStatementGuard s(Prepared(sql.c_str()));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  return ReadSession(*s);
+}
+
+std::vector<SessionRecord> SqliteDatabase::ListSessions(std::optional<PlanId> plan,
+                                                        std::size_t limit) {
+  static const std::string sql = std::string(kSessionColumns) +
+                                 "WHERE ?1 IS NULL OR plan_id = ?1 "
+                                 "ORDER BY started_unix_ms DESC, session_id DESC LIMIT ?2";
+  SqliteStatementGuard s(Prepared(sql.c_str()));
+  s->BindOptionalId(1, plan);
+  s->BindInt64(2, SqlLimit(limit));
+  std::vector<SessionRecord> sessions;
+  while (s->Step()) sessions.push_back(ReadSession(*s));
+  return sessions;
+}
+
+void SqliteDatabase::FinishSession(SessionId id, SessionStatus status, std::int64_t ended_unix_ms) {
+  ARPOS_CHECK(status != SessionStatus::kOpen,
+              "FinishSession needs status completed or aborted, not open");
+  SqliteStatementGuard s(
+      Prepared("UPDATE sessions SET status = ?1, ended_unix_ms = ?2 "
+               "WHERE session_id = ?3 AND status = 'open'"));
+  s->BindText(1, ToString(status));
+  s->BindInt64(2, OrNow(ended_unix_ms));
+  s->BindId(3, id);
+  s->Execute();
+  if (sqlite3_changes(db_) != 1) {
+    throw Error(path_ + ": session " + std::to_string(id.value()) +
+                " does not exist or is no longer open");
+  }
+}
+
+// ---------------------------------------------------------------- recordings
+
+RecordingId SqliteDatabase::AddRecording(const RecordingRecord& recording) {
+  const bool is_room = recording.kind == RecordingKind::kRoom;
+  ARPOS_CHECK(is_room ? (recording.plan_id && !recording.session_id)
+                      : (recording.session_id && !recording.plan_id),
+              "a " << ToString(recording.kind) << " recording belongs to "
+                   << (is_room ? "a plan (plan_id only)" : "a session (session_id only)"));
+  const RecordingIntrinsics& k = recording.intrinsics;
+  SqliteStatementGuard s(Prepared(
+      "INSERT INTO recordings (plan_id, session_id, kind, name, path, frame_count, width, "
+      "height, fx, fy, cx, cy, k1, k2, p1, p2, k3, depth_scale, created_unix_ms) "
+      "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, "
+      "?18, ?19)"));
+  s->BindOptionalId(1, recording.plan_id);
+  s->BindOptionalId(2, recording.session_id);
+  s->BindText(3, ToString(recording.kind));
+  s->BindText(4, recording.name);
+  s->BindText(5, recording.path);
+  s->BindInt64(6, recording.frame_count);
+  s->BindInt64(7, k.width);
+  s->BindInt64(8, k.height);
+  s->BindDouble(9, k.fx);
+  s->BindDouble(10, k.fy);
+  s->BindDouble(11, k.cx);
+  s->BindDouble(12, k.cy);
+  for (int i = 0; i < 5; ++i) s->BindDouble(13 + i, k.distortion[i]);
+  s->BindDouble(18, k.depth_scale);
+  s->BindInt64(19, OrNow(recording.created_unix_ms));
+  s->Execute();
+  return RecordingId(LastInsertRowId());
+}
+
+std::optional<RecordingRecord> SqliteDatabase::GetRecording(RecordingId id) {
+  SqliteStatementGuard s(Prepared(
+      "SELECT plan_id, session_id, kind, name, path, frame_count, width, height, fx, fy, cx, "
+      "cy, k1, k2, p1, p2, k3, depth_scale, created_unix_ms FROM recordings "
+      "WHERE recording_id = ?1"));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  RecordingRecord recording;
+  recording.id = id;
+  recording.plan_id = OptionalId<PlanId>(*s, 0);
+  recording.session_id = OptionalId<SessionId>(*s, 1);
+  recording.kind = ParseRecordingKind(s->ColumnText(2));
+  recording.name = s->ColumnText(3);
+  recording.path = s->ColumnText(4);
+  recording.frame_count = s->ColumnInt64(5);
+  RecordingIntrinsics& k = recording.intrinsics;
+  k.width = static_cast<int>(s->ColumnInt64(6));
+  k.height = static_cast<int>(s->ColumnInt64(7));
+  k.fx = s->ColumnDouble(8);
+  k.fy = s->ColumnDouble(9);
+  k.cx = s->ColumnDouble(10);
+  k.cy = s->ColumnDouble(11);
+  for (int i = 0; i < 5; ++i) k.distortion[i] = s->ColumnDouble(12 + i);
+  k.depth_scale = s->ColumnDouble(17);
+  recording.created_unix_ms = s->ColumnInt64(18);
+  return recording;
+}
+
+// ---------------------------------------------------------------- body marker maps
+
+BodyMarkerMapId SqliteDatabase::AddBodyMarkerMap(const BodyMarkerMapRecord& map) {
+  SqliteTransaction transaction(db_);
+  {
+    SqliteStatementGuard s(Prepared(
+        "INSERT INTO body_marker_maps (session_id, recording_id, marker_size_m, "
+        "mean_residual_px, max_residual_px, created_unix_ms) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
+    s->BindId(1, map.session_id);
+    s->BindOptionalId(2, map.recording_id);
+    s->BindDouble(3, map.marker_size_m);
+    s->BindDouble(4, map.mean_residual_px);
+    s->BindDouble(5, map.max_residual_px);
+    s->BindInt64(6, OrNow(map.created_unix_ms));
+    s->Execute();
+  }
+  const BodyMarkerMapId id(LastInsertRowId());
+  for (const BodyMarker& marker : map.markers) {
+    SqliteStatementGuard s(
+        Prepared("INSERT INTO body_marker_poses (body_marker_map_id, marker_id, body_from_marker, "
+                 "residual_px, num_observations) VALUES (?1, ?2, ?3, ?4, ?5)"));
+    s->BindId(1, id);
+    s->BindInt64(2, marker.marker_id);
+    s->BindBlob(3, EncodePose(marker.body_from_marker));
+    s->BindDouble(4, marker.residual_px);
+    s->BindInt64(5, marker.num_observations);
+    s->Execute();
+  }
+  transaction.Commit();
+  return id;
+}
+
+std::optional<BodyMarkerMapRecord> SqliteDatabase::GetBodyMarkerMap(BodyMarkerMapId id) {
+  BodyMarkerMapRecord map;
+  {
+    SqliteStatementGuard s(Prepared(
+        "SELECT session_id, recording_id, marker_size_m, mean_residual_px, max_residual_px, "
+        "created_unix_ms FROM body_marker_maps WHERE body_marker_map_id = ?1"));
+    s->BindId(1, id);
+    if (!s->Step()) return std::nullopt;
+    map.id = id;
+    map.session_id = SessionId(s->ColumnInt64(0));
+    map.recording_id = OptionalId<RecordingId>(*s, 1);
+    map.marker_size_m = s->ColumnDouble(2);
+    map.mean_residual_px = s->ColumnDouble(3);
+    map.max_residual_px = s->ColumnDouble(4);
+    map.created_unix_ms = s->ColumnInt64(5);
+  }
+  SqliteStatementGuard s(Prepared(
+      "SELECT marker_id, body_from_marker, residual_px, num_observations FROM body_marker_poses "
+      "WHERE body_marker_map_id = ?1 ORDER BY marker_id"));
+  s->BindId(1, id);
+  while (s->Step()) {
+    BodyMarker marker;
+    marker.marker_id = static_cast<int>(s->ColumnInt64(0));
+    marker.body_from_marker =
+        DecodePose(s->ColumnBlob(1), "body_marker_poses.body_from_marker of marker " +
+                                         std::to_string(marker.marker_id) + " in body marker map " +
+                                         std::to_string(id.value()));
+    marker.residual_px = s->ColumnDouble(2);
+    marker.num_observations = static_cast<int>(s->ColumnInt64(3));
+    map.markers.push_back(marker);
+  }
+  return map;
+}
+
+// ---------------------------------------------------------------- reconstructions
+
+ReconstructionId SqliteDatabase::AddReconstruction(const ReconstructionRecord& reconstruction) {
+  const Blob cloud = EncodePointCloud(reconstruction.cloud);
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO reconstructions (session_id, recording_id, cloud, mesh, num_points, "
+               "num_triangles, num_frames_used, voxel_size_m, created_unix_ms) "
+               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)"));
+  s->BindId(1, reconstruction.session_id);
+  s->BindOptionalId(2, reconstruction.recording_id);
+  s->BindBlob(3, cloud);
+  if (reconstruction.mesh) {
+    s->BindBlob(4, EncodeTriangleMesh(*reconstruction.mesh));
+  } else {
+    s->BindNull(4);
+  }
+  s->BindInt64(5, static_cast<std::int64_t>(reconstruction.cloud.points.size()));
+  s->BindInt64(
+      6, reconstruction.mesh ? static_cast<std::int64_t>(reconstruction.mesh->faces.size()) : 0);
+  s->BindInt64(7, reconstruction.num_frames_used);
+  s->BindDouble(8, reconstruction.voxel_size_m);
+  s->BindInt64(9, OrNow(reconstruction.created_unix_ms));
+  s->Execute();
+  return ReconstructionId(LastInsertRowId());
+}
+
+std::optional<ReconstructionRecord> SqliteDatabase::GetReconstruction(ReconstructionId id) {
+  SqliteStatementGuard s(
+      Prepared("SELECT session_id, recording_id, cloud, mesh, num_points, num_triangles, "
+               "num_frames_used, voxel_size_m, created_unix_ms FROM reconstructions "
+               "WHERE reconstruction_id = ?1"));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  ReconstructionRecord reconstruction;
+  reconstruction.id = id;
+  reconstruction.session_id = SessionId(s->ColumnInt64(0));
+  reconstruction.recording_id = OptionalId<RecordingId>(*s, 1);
+  const std::string cloud_context = Context("reconstructions.cloud", "reconstruction", id.value());
+  reconstruction.cloud = DecodePointCloud(s->ColumnBlob(2), cloud_context);
+  if (!s->ColumnIsNull(3)) {
+    reconstruction.mesh = DecodeTriangleMesh(
+        s->ColumnBlob(3), Context("reconstructions.mesh", "reconstruction", id.value()));
+  }
+  // The counts are denormalised for listings; a mismatch means the row was
+  // tampered with or damaged.
+  const auto num_points = static_cast<std::size_t>(s->ColumnInt64(4));
+  const auto num_triangles = static_cast<std::size_t>(s->ColumnInt64(5));
+  if (num_points != reconstruction.cloud.points.size() ||
+      num_triangles != (reconstruction.mesh ? reconstruction.mesh->faces.size() : 0)) {
+    throw CorruptBlobError(
+        cloud_context + ": the blobs hold " + std::to_string(reconstruction.cloud.points.size()) +
+        " points and " +
+        std::to_string(reconstruction.mesh ? reconstruction.mesh->faces.size() : 0) +
+        " triangles but the row says " + std::to_string(num_points) + " and " +
+        std::to_string(num_triangles));
+  }
+  reconstruction.num_frames_used = s->ColumnInt64(6);
+  reconstruction.voxel_size_m = s->ColumnDouble(7);
+  reconstruction.created_unix_ms = s->ColumnInt64(8);
+  return reconstruction;
+}
+
+// ---------------------------------------------------------------- alignments
+
+AlignmentId SqliteDatabase::AddAlignment(const AlignmentRecord& alignment) {
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO alignments (reconstruction_id, parent_alignment_id, method, "
+               "reconstruction_from_model, fitness, rmse_m, num_inliers, options, created_unix_ms) "
+               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)"));
+  s->BindId(1, alignment.reconstruction_id);
+  s->BindOptionalId(2, alignment.parent_alignment_id);
+  s->BindText(3, ToString(alignment.method));
+  s->BindBlob(4, EncodePose(alignment.reconstruction_from_model));
+  s->BindDouble(5, alignment.fitness);
+  s->BindDouble(6, alignment.rmse_m);
+  s->BindInt64(7, alignment.num_inliers);
+  s->BindText(8, alignment.options);
+  s->BindInt64(9, OrNow(alignment.created_unix_ms));
+  s->Execute();
+  return AlignmentId(LastInsertRowId());
+}
+
+std::optional<AlignmentRecord> SqliteDatabase::GetAlignment(AlignmentId id) {
+  static const std::string sql = std::string(kAlignmentColumns) + "WHERE alignment_id = ?1";
+  SqliteStatementGuard s(Prepared(sql.c_str()));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  return ReadAlignment(*s);
+}
+
+std::vector<AlignmentRecord> SqliteDatabase::ListAlignments(ReconstructionId reconstruction) {
+  static const std::string sql = std::string(kAlignmentColumns) +
+                                 "WHERE reconstruction_id = ?1 "
+                                 "ORDER BY created_unix_ms, alignment_id";
+  SqliteStatementGuard s(Prepared(sql.c_str()));
+  s->BindId(1, reconstruction);
+  std::vector<AlignmentRecord> alignments;
+  while (s->Step()) alignments.push_back(ReadAlignment(*s));
+  return alignments;
+}
+
+// ---------------------------------------------------------------- tracking
+
+TrackingRunId SqliteDatabase::AddTrackingRun(const TrackingRunRecord& run) {
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO tracking_runs (session_id, alignment_id, recording_id, options, "
+               "tolerance_translation_mm, tolerance_rotation_deg, started_unix_ms) "
+               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+  s->BindId(1, run.session_id);
+  s->BindOptionalId(2, run.alignment_id);
+  s->BindOptionalId(3, run.recording_id);
+  s->BindText(4, run.options);
+  s->BindDouble(5, run.tolerance_translation_mm);
+  s->BindDouble(6, run.tolerance_rotation_deg);
+  s->BindInt64(7, OrNow(run.started_unix_ms));
+  s->Execute();
+  return TrackingRunId(LastInsertRowId());
+}
+
+std::optional<TrackingRunRecord> SqliteDatabase::GetTrackingRun(TrackingRunId id) {
+  SqliteStatementGuard s(Prepared(
+      "SELECT session_id, alignment_id, recording_id, options, tolerance_translation_mm, "
+      "tolerance_rotation_deg, started_unix_ms FROM tracking_runs WHERE tracking_run_id = ?1"));
+  s->BindId(1, id);
+  if (!s->Step()) return std::nullopt;
+  TrackingRunRecord run;
+  run.id = id;
+  run.session_id = SessionId(s->ColumnInt64(0));
+  run.alignment_id = OptionalId<AlignmentId>(*s, 1);
+  run.recording_id = OptionalId<RecordingId>(*s, 2);
+  run.options = s->ColumnText(3);
+  run.tolerance_translation_mm = s->ColumnDouble(4);
+  run.tolerance_rotation_deg = s->ColumnDouble(5);
+  run.started_unix_ms = s->ColumnInt64(6);
+  return run;
+}
+
+void SqliteDatabase::AppendTrackingFrames(TrackingRunId run,
+                                          const std::vector<TrackingFrameRecord>& frames) {
+  for (const TrackingFrameRecord& frame : frames) {
+    const bool lost = frame.status == TrackingFrameStatus::kLost;
+    ARPOS_CHECK(lost != frame.room_from_model.has_value() && lost != frame.correction.has_value(),
+                "tracking frame " << frame.frame_index << " has status " << ToString(frame.status)
+                                  << ": a frame has a pose and a correction exactly when it is "
+                                     "not lost");
+  }
+  SqliteTransaction transaction(db_);
+  for (const TrackingFrameRecord& frame : frames) {
+    SqliteStatementGuard s(
+        Prepared("INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status, "
+                 "room_from_model, correction_tx_mm, correction_ty_mm, correction_tz_mm, "
+                 "correction_rx_deg, correction_ry_deg, correction_rz_deg) "
+                 "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)"));
+    s->BindId(1, run);
+    s->BindInt64(2, frame.frame_index);
+    s->BindDouble(3, frame.timestamp_s);
+    s->BindText(4, ToString(frame.status));
+    if (frame.room_from_model) {
+      s->BindBlob(5, EncodePose(*frame.room_from_model));
+    } else {
+      s->BindNull(5);
+    }
+    for (int i = 0; i < 3; ++i) {
+      if (frame.correction) {
+        s->BindDouble(6 + i, frame.correction->translation_mm[i]);
+        s->BindDouble(9 + i, frame.correction->rotation_deg[i]);
+      } else {
+        s->BindNull(6 + i);
+        s->BindNull(9 + i);
+      }
+    }
+    s->Execute();
+  }
+  transaction.Commit();
+}
+
+std::vector<TrackingFrameRecord> SqliteDatabase::GetTrackingFrames(TrackingRunId run) {
+  SqliteStatementGuard s(Prepared(
+      "SELECT frame_index, timestamp_s, status, room_from_model, correction_tx_mm, "
+      "correction_ty_mm, correction_tz_mm, correction_rx_deg, correction_ry_deg, "
+      "correction_rz_deg FROM tracking_frames WHERE tracking_run_id = ?1 ORDER BY frame_index"));
+  s->BindId(1, run);
+  std::vector<TrackingFrameRecord> frames;
+  while (s->Step()) {
+    TrackingFrameRecord frame;
+    frame.frame_index = s->ColumnInt64(0);
+    frame.timestamp_s = s->ColumnDouble(1);
+    frame.status = ParseTrackingFrameStatus(s->ColumnText(2));
+    if (!s->ColumnIsNull(3)) {
+      frame.room_from_model =
+          DecodePose(s->ColumnBlob(3), "tracking_frames.room_from_model of frame " +
+                                           std::to_string(frame.frame_index) + " in tracking run " +
+                                           std::to_string(run.value()));
+    }
+    if (!s->ColumnIsNull(4)) {
+      Correction6Dof correction;
+      for (int i = 0; i < 3; ++i) {
+        correction.translation_mm[i] = s->ColumnDouble(4 + i);
+        correction.rotation_deg[i] = s->ColumnDouble(7 + i);
+      }
+      frame.correction = correction;
+    }
+    frames.push_back(std::move(frame));
+  }
+  return frames;
+}
+
+// ---------------------------------------------------------------- audit
+
+AuditId SqliteDatabase::AppendAudit(const AuditEntry& entry) {
+  ARPOS_CHECK(!entry.actor.empty() && !entry.action.empty(),
+              "an audit entry needs an actor and an action");
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO audit_log (time_unix_ms, actor, action, entity, details) "
+               "VALUES (?1, ?2, ?3, ?4, ?5)"));
+  s->BindInt64(1, OrNow(entry.time_unix_ms));
+  s->BindText(2, entry.actor);
+  s->BindText(3, entry.action);
+  s->BindText(4, entry.entity);
+  s->BindText(5, entry.details);
+  s->Execute();
+  return AuditId(LastInsertRowId());
+}
+
+std::vector<AuditEntry> SqliteDatabase::ListAudit(AuditId after, std::size_t limit) {
+  SqliteStatementGuard s(
+      Prepared("SELECT audit_id, time_unix_ms, actor, action, entity, details FROM audit_log "
+               "WHERE audit_id > ?1 ORDER BY audit_id LIMIT ?2"));
+  s->BindId(1, after);
+  s->BindInt64(2, SqlLimit(limit));
+  std::vector<AuditEntry> entries;
+  while (s->Step()) {
+    AuditEntry entry;
+    entry.id = AuditId(s->ColumnInt64(0));
+    entry.time_unix_ms = s->ColumnInt64(1);
+    entry.actor = s->ColumnText(2);
+    entry.action = s->ColumnText(3);
+    entry.entity = s->ColumnText(4);
+    entry.details = s->ColumnText(5);
+    entries.push_back(std::move(entry));
+  }
+  return entries;
+}
+
+}  // namespace arpos
