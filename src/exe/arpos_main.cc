@@ -59,7 +59,7 @@ void PrintHelp(std::ostream& out) {
       << "usage: arpos COMMAND [ARGS...]    (arpos COMMAND --help for details)\n\n"
       << "commands:\n";
   for (const auto& c : Commands()) {
-    out << "  " << c.name << std::string(12 - std::min<size_t>(11, std::strlen(c.name)), ' ')
+    out << "  " << c.name << std::string(14 - std::min<size_t>(13, std::strlen(c.name)), ' ')
         << c.summary << "\n";
   }
   out << "\nglobal options (before the command): --verbose, --quiet\n"

@@ -1,20 +1,49 @@
 #include <iostream>
 
+#include "controllers/run_case_controller.h"
 #include "exe/args.h"
 #include "exe/commands.h"
-#include "sensor/case_check.h"
+#include "store/sqlite_database.h"
+#include "store/store_path.h"
+#include "util/string_util.h"
 
 namespace arpos {
 
 int RunRunCaseCommand(const std::vector<std::string>& argv) {
-  const Args args(argv, {"store"}, {"help"});
-  if (args.Has("help") || args.positional().size() != 1) {
-    std::cout << "usage: arpos run-case CASE_DIR [--store DB]\n";
-    return args.Has("help") ? 0 : 2;
+  const char* usage =
+      "usage: arpos run-case CASE_DIR [--store DB] [--patient ID] [--quick]\n"
+      "Runs every stage that exists on a case folder (DATASET.md) and stores the\n"
+      "results in the session store: validates the case, imports the reference\n"
+      "model and target pose into a plan, registers the recordings and opens a\n"
+      "session.\n"
+      "  --store DB     session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
+      "  --patient ID   patient id to file the plan under (default: the case folder name)\n"
+      "  --quick        check a sample of the images instead of all\n";
+  const Args args(argv, {"store", "patient"}, {"quick", "help"});
+  if (args.Has("help")) {
+    std::cout << usage;
+    return 0;
   }
-  const CaseCheckReport report = CheckCase(args.positional()[0]);
-  for (const auto& p : report.problems) std::cout << p.ToString() << "\n";
-  return report.ok() ? 0 : 1;
+  if (args.positional().size() != 1) {
+    std::cerr << usage;
+    return 2;
+  }
+  RunCaseOptions options;
+  options.case_dir = args.positional()[0];
+  options.patient_external_id = args.GetOr("patient", "");
+  options.read_all_images = !args.Has("quick");
+  const std::string store_path = args.GetOr("store", DefaultStorePath());
+  auto database = SqliteDatabase::Open(store_path);
+  RunCaseController controller(options, database.get(),
+                               {[](const std::string& step, double fraction) {
+                                  std::cerr << StringPrintf("[%3.0f%%] ", 100 * fraction) << step
+                                            << std::endl;
+                                },
+                                nullptr});
+  controller.Run();
+  for (const auto& w : controller.result().warnings) std::cout << w << "\n";
+  std::cout << "store: " << store_path << "\n" << controller.result().Summary();
+  return 0;
 }
 
 }  // namespace arpos

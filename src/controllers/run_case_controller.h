@@ -1,0 +1,59 @@
+#pragma once
+/// `arpos run-case`: runs every stage that exists on one case folder and
+/// stores every artefact in the session store.
+///
+/// Stages, in order: validate the case (CheckCase); import the reference
+/// model and target pose into a plan (patient = the case folder's name unless
+/// given); register the room, body-scan and tracking recordings; open a
+/// session. Later stages (room map, body marker map, reconstruction,
+/// alignment, tracking) join here as they are built. Every write is logged
+/// in the audit log with `actor`.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "controllers/controller.h"
+#include "store/records.h"
+
+namespace arpos {
+
+class Database;
+
+struct RunCaseOptions {
+  std::filesystem::path case_dir;
+  std::string patient_external_id;  ///< empty: the case folder's name
+  std::string actor = "arpos run-case";
+  bool read_all_images = true;      ///< false: check a sample of the images
+
+  /// Empty if valid, else what is wrong.
+  std::string Check() const;
+};
+
+struct RunCaseResult {
+  PatientId patient_id;
+  PlanId plan_id;
+  SessionId session_id;
+  std::vector<RecordingId> recordings;
+  int reference_model_vertices = 0;
+  int frames = 0;
+  std::vector<std::string> warnings;  ///< from the case check
+  std::vector<std::string> stages_done;
+  /// A person-readable summary of what was done and stored.
+  std::string Summary() const;
+};
+
+class RunCaseController : public Controller {
+ public:
+  RunCaseController(RunCaseOptions options, Database* database, ControllerCallbacks callbacks = {});
+  void Run() override;
+  const RunCaseResult& result() const { return result_; }
+
+ private:
+  RunCaseOptions options_;
+  Database* database_;
+  RunCaseResult result_;
+};
+
+}  // namespace arpos

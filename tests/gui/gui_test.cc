@@ -1,0 +1,76 @@
+// Opens every wizard page of the real executable and looks at what it shows.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <opencv2/imgcodecs.hpp>
+#include <string>
+
+#include "sensor/test_case_builder.h"
+#include "util/file.h"
+
+namespace arpos {
+namespace {
+
+int RunArpos(const std::string& args, std::string* output) {
+  const std::string command = std::string(ARPOS_EXECUTABLE) + " " + args + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  if (!pipe) return -1;
+  char buffer[4096];
+  size_t n;
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) output->append(buffer, n);
+  const int status = pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+class GuiTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!std::getenv("DISPLAY")) GTEST_SKIP() << "no X display: run through tools/test.sh (xvfb-run)";
+    testing::WriteTinyCase(case_dir());
+    std::string out;
+    ASSERT_EQ(RunArpos("run-case " + case_dir().string() + " --store " + store().string(), &out), 0) << out;
+  }
+  std::filesystem::path case_dir() const { return dir_.path() / "case"; }
+  std::filesystem::path store() const { return dir_.path() / "store.db"; }
+  cv::Mat Screenshot(int page) {
+    const auto png = dir_.path() / ("page" + std::to_string(page) + ".png");
+    std::string out;
+    EXPECT_EQ(RunArpos("gui --store " + store().string() + " --case " + case_dir().string() +
+                           " --page " + std::to_string(page) + " --screenshot " + png.string(),
+                       &out),
+              0)
+        << out;
+    return cv::imread(png.string(), cv::IMREAD_COLOR);
+  }
+  TempDir dir_;
+};
+
+TEST_F(GuiTest, EveryPageDraws) {
+  for (int page = 0; page <= 4; ++page) {
+    const cv::Mat shot = Screenshot(page);
+    ASSERT_FALSE(shot.empty()) << "page " << page;
+    EXPECT_GE(shot.cols, 800) << "page " << page;
+    EXPECT_GE(shot.rows, 600) << "page " << page;
+    cv::Scalar mean, stddev;
+    cv::meanStdDev(shot, mean, stddev);
+    EXPECT_GT(stddev[0] + stddev[1] + stddev[2], 10.0) << "page " << page << " is blank";
+  }
+}
+
+TEST_F(GuiTest, PlanningPageRendersTheReferenceModelInBlue) {
+  const cv::Mat shot = Screenshot(1);
+  ASSERT_FALSE(shot.empty());
+  int blue = 0;
+  for (int y = 0; y < shot.rows; ++y) {
+    for (int x = 0; x < shot.cols; ++x) {
+      const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
+      if (p[0] > p[2] + 60 && p[0] > p[1] + 30) ++blue;
+    }
+  }
+  // The VTK view drew the model (no OpenGL context means no blue at all).
+  EXPECT_GT(blue, 300);
+}
+
+}  // namespace
+}  // namespace arpos

@@ -1,0 +1,100 @@
+#include "ui/model_view.h"
+
+#include <QVBoxLayout>
+#include <QVTKOpenGLNativeWidget.h>
+#include <map>
+#include <vtkActor.h>
+#include <vtkAxesActor.h>
+#include <vtkCellArray.h>
+#include <vtkGenericOpenGLRenderWindow.h>
+#include <vtkNew.h>
+#include <vtkPoints.h>
+#include <vtkPolyData.h>
+#include <vtkPolyDataMapper.h>
+#include <vtkPolyDataNormals.h>
+#include <vtkProperty.h>
+#include <vtkRenderer.h>
+#include <vtkSmartPointer.h>
+
+namespace arpos::ui {
+
+struct ModelView::Impl {
+  QVTKOpenGLNativeWidget* widget = nullptr;
+  vtkNew<vtkGenericOpenGLRenderWindow> window;
+  vtkNew<vtkRenderer> renderer;
+  std::map<std::string, vtkSmartPointer<vtkActor>> actors;
+  vtkSmartPointer<vtkAxesActor> axes;
+};
+
+ModelView::ModelView(QWidget* parent) : QWidget(parent), impl_(std::make_unique<Impl>()) {
+  auto* layout = new QVBoxLayout(this);
+  layout->setContentsMargins(0, 0, 0, 0);
+  impl_->widget = new QVTKOpenGLNativeWidget(this);
+  impl_->widget->setRenderWindow(impl_->window);
+  impl_->window->AddRenderer(impl_->renderer);
+  impl_->renderer->SetBackground(0.12, 0.13, 0.16);
+  impl_->renderer->SetBackground2(0.30, 0.32, 0.38);
+  impl_->renderer->GradientBackgroundOn();
+  layout->addWidget(impl_->widget);
+  setMinimumSize(320, 240);
+}
+
+ModelView::~ModelView() = default;
+
+void ModelView::SetMesh(const std::string& slot, const TriangleMesh& mesh, const Rigid3d& room_from_model,
+                        double r, double g, double b, double opacity) {
+  vtkNew<vtkPoints> points;
+  points->SetNumberOfPoints(static_cast<vtkIdType>(mesh.vertices.size()));
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const Eigen::Vector3d p = room_from_model * mesh.vertices[i].cast<double>();
+    points->SetPoint(static_cast<vtkIdType>(i), p.x(), p.y(), p.z());
+  }
+  vtkNew<vtkCellArray> polys;
+  for (const auto& f : mesh.faces) {
+    const vtkIdType ids[3] = {f[0], f[1], f[2]};
+    polys->InsertNextCell(3, ids);
+  }
+  vtkNew<vtkPolyData> poly;
+  poly->SetPoints(points);
+  poly->SetPolys(polys);
+  vtkNew<vtkPolyDataNormals> normals;
+  normals->SetInputData(poly);
+  normals->SplittingOff();
+  vtkNew<vtkPolyDataMapper> mapper;
+  mapper->SetInputConnection(normals->GetOutputPort());
+  auto& actor = impl_->actors[slot];
+  if (actor) impl_->renderer->RemoveActor(actor);
+  actor = vtkSmartPointer<vtkActor>::New();
+  actor->SetMapper(mapper);
+  actor->GetProperty()->SetColor(r, g, b);
+  actor->GetProperty()->SetOpacity(opacity);
+  impl_->renderer->AddActor(actor);
+  impl_->window->Render();
+}
+
+void ModelView::ClearMeshes() {
+  for (auto& [slot, actor] : impl_->actors) impl_->renderer->RemoveActor(actor);
+  impl_->actors.clear();
+  impl_->window->Render();
+}
+
+void ModelView::ShowRoomAxes(double length_m) {
+  if (!impl_->axes) {
+    impl_->axes = vtkSmartPointer<vtkAxesActor>::New();
+    impl_->renderer->AddActor(impl_->axes);
+  }
+  impl_->axes->SetTotalLength(length_m, length_m, length_m);
+  impl_->axes->SetAxisLabels(0);
+}
+
+void ModelView::ResetCamera() {
+  impl_->renderer->ResetCamera();
+  impl_->window->Render();
+}
+
+QImage ModelView::Grab() {
+  impl_->window->Render();
+  return impl_->widget->grabFramebuffer();
+}
+
+}  // namespace arpos::ui

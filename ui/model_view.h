@@ -1,0 +1,36 @@
+#pragma once
+/// A 3D view of meshes (the reference model at its target pose in the room,
+/// later the reconstruction). The only VTK code of the GUI lives behind this
+/// class, so that no other file includes VTK headers.
+
+#include <QWidget>
+#include <memory>
+
+#include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
+
+namespace arpos::ui {
+
+class ModelView : public QWidget {
+  Q_OBJECT
+ public:
+  explicit ModelView(QWidget* parent = nullptr);
+  ~ModelView() override;
+
+  /// Shows `mesh_in_model` mapped by `room_from_model` in colour (r, g, b in
+  /// [0, 1]); replaces any mesh with the same `slot` name.
+  void SetMesh(const std::string& slot, const TriangleMesh& mesh_in_model,
+               const Rigid3d& room_from_model, double r, double g, double b, double opacity = 1.0);
+  void ClearMeshes();
+  /// Shows room axes (x red, y green, z blue) of the given length at the origin.
+  void ShowRoomAxes(double length_m);
+  void ResetCamera();
+  /// Renders and reads back the current image (for screenshots and tests).
+  QImage Grab();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace arpos::ui

@@ -1,0 +1,365 @@
+#include "ui/pages.h"
+
+#include <QComboBox>
+#include <QFileDialog>
+#include <QFormLayout>
+#include <QHBoxLayout>
+#include <QHeaderView>
+#include <QLabel>
+#include <QLineEdit>
+#include <QListWidget>
+#include <QMessageBox>
+#include <QPlainTextEdit>
+#include <QProgressBar>
+#include <QPushButton>
+#include <QSlider>
+#include <QTableWidget>
+#include <QTextStream>
+#include <QVBoxLayout>
+#include <fstream>
+
+#include "controllers/run_case_controller.h"
+#include "geometry/so3.h"
+#include "sensor/case_check.h"
+#include "sensor/case_folder.h"
+#include "sensor/sequence.h"
+#include "store/database.h"
+#include "store/describe.h"
+#include "store/sqlite_database.h"
+#include "ui/frame_view.h"
+#include "ui/model_view.h"
+#include "ui/worker.h"
+#include "util/string_util.h"
+
+namespace arpos::ui {
+namespace {
+
+QString Q(const std::string& s) { return QString::fromStdString(s); }
+
+TriangleMesh FromStored(const StoredTriangleMesh& stored) {
+  TriangleMesh mesh;
+  mesh.vertices = stored.vertices;
+  for (const auto& f : stored.faces) {
+    mesh.faces.emplace_back(static_cast<int>(f[0]), static_cast<int>(f[1]), static_cast<int>(f[2]));
+  }
+  return mesh;
+}
+
+QPushButton* BrowseButton(QWidget* parent, QLineEdit* edit, bool folder) {
+  auto* button = new QPushButton(QObject::tr("Browse…"), parent);
+  QObject::connect(button, &QPushButton::clicked, parent, [parent, edit, folder] {
+    const QString path = folder ? QFileDialog::getExistingDirectory(parent, QObject::tr("Case folder"), edit->text())
+                                : QFileDialog::getSaveFileName(parent, QObject::tr("Session store"), edit->text(),
+                                                               QObject::tr("SQLite (*.db)"), nullptr,
+                                                               QFileDialog::DontConfirmOverwrite);
+    if (!path.isEmpty()) edit->setText(path);
+  });
+  return button;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- case
+
+CasePage::CasePage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
+  setTitle(tr("Case and session store"));
+  setSubTitle(tr("Choose where results are stored and the case folder to work on. "
+                 "Check the case before planning."));
+  store_edit_ = new QLineEdit(Q(state->options.store_path), this);
+  case_edit_ = new QLineEdit(Q(state->options.case_dir), this);
+  auto* form = new QFormLayout;
+  auto* store_row = new QHBoxLayout;
+  store_row->addWidget(store_edit_);
+  store_row->addWidget(BrowseButton(this, store_edit_, false));
+  auto* case_row = new QHBoxLayout;
+  case_row->addWidget(case_edit_);
+  case_row->addWidget(BrowseButton(this, case_edit_, true));
+  form->addRow(tr("Session store:"), store_row);
+  form->addRow(tr("Case folder:"), case_row);
+
+  auto* check_button = new QPushButton(tr("Check case"), this);
+  connect(check_button, &QPushButton::clicked, this, &CasePage::RunCheck);
+  status_ = new QLabel(this);
+  problems_ = new QListWidget(this);
+  store_summary_ = new QPlainTextEdit(this);
+  store_summary_->setReadOnly(true);
+  store_summary_->setFont(QFont("Monospace", 9));
+
+  auto* layout = new QVBoxLayout(this);
+  layout->addLayout(form);
+  auto* check_row = new QHBoxLayout;
+  check_row->addWidget(check_button);
+  check_row->addWidget(status_, 1);
+  layout->addLayout(check_row);
+  layout->addWidget(new QLabel(tr("Problems found in the case:"), this));
+  layout->addWidget(problems_, 1);
+  layout->addWidget(new QLabel(tr("What the store holds:"), this));
+  layout->addWidget(store_summary_, 1);
+  connect(store_edit_, &QLineEdit::editingFinished, this, &CasePage::RefreshStore);
+}
+
+void CasePage::initializePage() {
+  RefreshStore();
+  if (!case_edit_->text().isEmpty()) RunCheck();
+}
+
+void CasePage::RefreshStore() {
+  state_->options.store_path = store_edit_->text().toStdString();
+  const std::string error = state_->OpenStore();
+  store_summary_->setPlainText(error.empty() ? Q(DescribeStore(*state_->database)) : Q(error));
+}
+
+void CasePage::RunCheck() {
+  state_->options.case_dir = case_edit_->text().toStdString();
+  problems_->clear();
+  CaseCheckOptions options;
+  options.read_all_images = false;
+  const CaseCheckReport report = CheckCase(state_->options.case_dir, options);
+  for (const auto& p : report.problems) {
+    auto* item = new QListWidgetItem(Q(p.ToString()), problems_);
+    item->setForeground(p.severity == CaseProblem::Severity::kError ? QColor(200, 40, 40)
+                                                                   : QColor(170, 120, 0));
+  }
+  if (report.problems.empty()) new QListWidgetItem(tr("No problems found."), problems_);
+  status_->setText(report.ok() ? tr("Case OK: %1 sequences, %2 frames").arg(report.sequences).arg(report.frames)
+                               : tr("The case has errors: fix them before planning."));
+  status_->setStyleSheet(report.ok() ? "color: #2a7a2a; font-weight: bold;" : "color: #c02828; font-weight: bold;");
+}
+
+bool CasePage::validatePage() {
+  state_->options.store_path = store_edit_->text().toStdString();
+  state_->options.case_dir = case_edit_->text().toStdString();
+  const std::string error = state_->OpenStore();
+  if (!error.empty()) {
+    QMessageBox::warning(this, tr("Session store"), Q(error));
+    return false;
+  }
+  return true;
+}
+
+// ---------------------------------------------------------------- planning
+
+PlanningPage::PlanningPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
+  setTitle(tr("Planning"));
+  setSubTitle(tr("Import the case into a plan: reference body surface and its desired pose in the room "
+                 "(blue). The room map is built from the room recording."));
+  model_view_ = new ModelView(this);
+  plan_label_ = new QLabel(this);
+  plan_label_->setWordWrap(true);
+  import_button_ = new QPushButton(tr("Import case into a new plan"), this);
+  progress_ = new QProgressBar(this);
+  progress_->setRange(0, 100);
+  connect(import_button_, &QPushButton::clicked, this, &PlanningPage::ImportCase);
+  connect(state->worker, &Worker::Progress, this, [this](QString step, double fraction) {
+    progress_->setValue(static_cast<int>(100 * fraction));
+    progress_->setFormat(step + " %p%");
+  });
+  auto* layout = new QVBoxLayout(this);
+  layout->addWidget(model_view_, 1);
+  layout->addWidget(plan_label_);
+  auto* row = new QHBoxLayout;
+  row->addWidget(import_button_);
+  row->addWidget(progress_, 1);
+  layout->addLayout(row);
+}
+
+void PlanningPage::initializePage() { ShowLatestPlan(); }
+
+void PlanningPage::ShowLatestPlan() {
+  if (!state_->database) return;
+  const auto plans = state_->database->ListPlans(std::nullopt, 1);
+  if (plans.empty()) {
+    plan_label_->setText(tr("The store holds no plan yet: import the case."));
+    model_view_->ClearMeshes();
+    return;
+  }
+  const auto plan = state_->database->GetPlan(plans.front().id);
+  if (!plan) return;
+  const Rigid3d& target = plan->room_from_model_target;
+  const Eigen::Vector3d r_deg = target.RotationVector() * (180.0 / M_PI);
+  plan_label_->setText(
+      Q(StringPrintf("Plan %lld \"%s\" of patient %s: reference model %s (%zu vertices). Target pose: "
+                     "t = (%.1f, %.1f, %.1f) mm, rotation vector (%.2f, %.2f, %.2f) deg.",
+                     static_cast<long long>(plan->id.value()), plan->name.c_str(),
+                     plans.front().patient_external_id.c_str(), plan->reference_model_name.c_str(),
+                     plan->reference_model.vertices.size(), 1000 * target.translation.x(),
+                     1000 * target.translation.y(), 1000 * target.translation.z(), r_deg.x(), r_deg.y(),
+                     r_deg.z())));
+  model_view_->SetMesh("target", FromStored(plan->reference_model), target, 0.25, 0.45, 0.95);
+  model_view_->ShowRoomAxes(0.3);
+  model_view_->ResetCamera();
+}
+
+void PlanningPage::ImportCase() {
+  if (state_->options.case_dir.empty()) {
+    QMessageBox::warning(this, tr("Planning"), tr("Choose a case folder on the first page."));
+    return;
+  }
+  import_button_->setEnabled(false);
+  // The worker thread opens its own store connection: Database objects are
+  // not shared between threads.
+  const std::string store_path = state_->options.store_path;
+  const std::string case_dir = state_->options.case_dir;
+  auto connection = std::make_shared<QMetaObject::Connection>();
+  *connection = connect(state_->worker, &Worker::Finished, this, [this, connection](bool ok, QString message) {
+    disconnect(*connection);
+    import_button_->setEnabled(true);
+    if (!ok) QMessageBox::critical(this, tr("Import failed"), message);
+    ShowLatestPlan();
+  });
+  state_->worker->Start([store_path, case_dir](const ControllerCallbacks& callbacks) {
+    auto database = SqliteDatabase::Open(store_path);
+    RunCaseOptions options;
+    options.case_dir = case_dir;
+    options.actor = "arpos gui";
+    options.read_all_images = false;
+    RunCaseController controller(options, database.get(), callbacks);
+    controller.Run();
+    return controller.result().Summary();
+  });
+}
+
+// ---------------------------------------------------------------- session
+
+SessionPage::SessionPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
+  setTitle(tr("Session"));
+  setSubTitle(tr("Treatment sessions of the plans in the store: body marker map, reconstruction and "
+                 "alignment of the reference model."));
+  sessions_ = new QTableWidget(this);
+  sessions_->setColumnCount(5);
+  sessions_->setHorizontalHeaderLabels({tr("Session"), tr("Plan"), tr("Fraction"), tr("Started (UTC)"), tr("Status")});
+  sessions_->horizontalHeader()->setStretchLastSection(true);
+  sessions_->setEditTriggers(QAbstractItemView::NoEditTriggers);
+  stages_ = new QLabel(this);
+  stages_->setWordWrap(true);
+  auto* layout = new QVBoxLayout(this);
+  layout->addWidget(sessions_, 1);
+  layout->addWidget(stages_);
+}
+
+void SessionPage::initializePage() {
+  sessions_->setRowCount(0);
+  if (!state_->database) return;
+  const auto sessions = state_->database->ListSessions(std::nullopt, 50);
+  sessions_->setRowCount(static_cast<int>(sessions.size()));
+  for (int row = 0; row < static_cast<int>(sessions.size()); ++row) {
+    const auto& s = sessions[row];
+    const QStringList cells = {QString::number(s.id.value()), QString::number(s.plan_id.value()),
+                               QString::number(s.fraction), Q(FormatUtcTime(s.started_unix_ms)),
+                               Q(ToString(s.status))};
+    for (int c = 0; c < cells.size(); ++c) sessions_->setItem(row, c, new QTableWidgetItem(cells[c]));
+  }
+  sessions_->resizeColumnsToContents();
+  const StoreInfo info = state_->database->Info();
+  stages_->setText(tr("Stored so far: %1 body marker maps, %2 reconstructions, %3 alignments.")
+                       .arg(info.RowCount("body_marker_maps"))
+                       .arg(info.RowCount("reconstructions"))
+                       .arg(info.RowCount("alignments")));
+}
+
+// ---------------------------------------------------------------- tracking
+
+TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
+  setTitle(tr("Tracking"));
+  setSubTitle(tr("Replay a recording of the case as if live."));
+  sequences_ = new QComboBox(this);
+  slider_ = new QSlider(Qt::Horizontal, this);
+  color_view_ = new FrameView(this);
+  depth_view_ = new FrameView(this);
+  frame_label_ = new QLabel(this);
+  connect(sequences_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] { LoadSequence(); });
+  connect(slider_, &QSlider::valueChanged, this, &TrackingPage::ShowFrame);
+  auto* views = new QHBoxLayout;
+  views->addWidget(color_view_, 1);
+  views->addWidget(depth_view_, 1);
+  auto* layout = new QVBoxLayout(this);
+  layout->addWidget(sequences_);
+  layout->addLayout(views, 1);
+  layout->addWidget(slider_);
+  layout->addWidget(frame_label_);
+}
+
+void TrackingPage::initializePage() {
+  sequences_->clear();
+  try {
+    const CaseFolder folder = LoadCaseFolder(state_->options.case_dir);
+    for (const auto& [name, dir] : folder.tracking) sequences_->addItem(Q("tracking/" + name), Q(dir.string()));
+    sequences_->addItem("body_scan", Q(folder.body_scan_dir.string()));
+    sequences_->addItem("room", Q(folder.room_dir.string()));
+  } catch (const std::exception& e) {
+    frame_label_->setText(Q(e.what()));
+  }
+}
+
+void TrackingPage::LoadSequence() {
+  const QString dir = sequences_->currentData().toString();
+  if (dir.isEmpty()) return;
+  try {
+    const Sequence seq = Sequence::Open(dir.toStdString());
+    slider_->setRange(0, static_cast<int>(seq.size()) - 1);
+    slider_->setValue(0);
+    ShowFrame(0);
+  } catch (const std::exception& e) {
+    frame_label_->setText(Q(e.what()));
+  }
+}
+
+void TrackingPage::ShowFrame(int index) {
+  const QString dir = sequences_->currentData().toString();
+  if (dir.isEmpty()) return;
+  try {
+    const CaseConfig config = LoadCaseConfig(std::filesystem::path(state_->options.case_dir) / "case.yaml");
+    const Sequence seq = Sequence::Open(dir.toStdString());
+    const RgbdFrame frame = seq.LoadFrame(static_cast<size_t>(index), config.camera);
+    color_view_->ShowColor(frame.color);
+    depth_view_->ShowDepth(frame.depth, frame.depth_scale);
+    frame_label_->setText(tr("frame %1 of %2, t = %3 s").arg(index + 1).arg(seq.size()).arg(frame.timestamp_s, 0, 'f', 3));
+  } catch (const std::exception& e) {
+    frame_label_->setText(Q(e.what()));
+  }
+}
+
+// ---------------------------------------------------------------- audit
+
+AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
+  setTitle(tr("Audit"));
+  setSubTitle(tr("Who did what and when: the store's append-only audit log."));
+  table_ = new QTableWidget(this);
+  table_->setColumnCount(5);
+  table_->setHorizontalHeaderLabels({tr("Time (UTC)"), tr("Actor"), tr("Action"), tr("Entity"), tr("Details")});
+  table_->horizontalHeader()->setStretchLastSection(true);
+  table_->setEditTriggers(QAbstractItemView::NoEditTriggers);
+  auto* export_button = new QPushButton(tr("Export report…"), this);
+  connect(export_button, &QPushButton::clicked, this, &AuditPage::ExportReport);
+  auto* layout = new QVBoxLayout(this);
+  layout->addWidget(table_, 1);
+  layout->addWidget(export_button, 0, Qt::AlignRight);
+}
+
+void AuditPage::initializePage() {
+  table_->setRowCount(0);
+  if (!state_->database) return;
+  const auto entries = state_->database->ListAudit();
+  table_->setRowCount(static_cast<int>(entries.size()));
+  for (int row = 0; row < static_cast<int>(entries.size()); ++row) {
+    const auto& e = entries[row];
+    const QStringList cells = {Q(FormatUtcTime(e.time_unix_ms)), Q(e.actor), Q(e.action), Q(e.entity), Q(e.details)};
+    for (int c = 0; c < cells.size(); ++c) table_->setItem(row, c, new QTableWidgetItem(cells[c]));
+  }
+  table_->resizeColumnsToContents();
+}
+
+void AuditPage::ExportReport() {
+  const QString path = QFileDialog::getSaveFileName(this, tr("Export report"), "arpos_report.txt",
+                                                    tr("Text (*.txt)"));
+  if (path.isEmpty() || !state_->database) return;
+  std::ofstream out(path.toStdString());
+  out << DescribeStore(*state_->database, 50) << "\nAudit log\n";
+  for (const auto& e : state_->database->ListAudit()) {
+    out << FormatUtcTime(e.time_unix_ms) << "  " << e.actor << "  " << e.action << "  " << e.entity << "  "
+        << e.details << "\n";
+  }
+  if (!out) QMessageBox::critical(this, tr("Export report"), tr("Could not write %1").arg(path));
+}
+
+}  // namespace arpos::ui

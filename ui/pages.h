@@ -1,0 +1,98 @@
+#pragma once
+/// The wizard's pages. Each reads what the store holds when it is shown.
+
+#include <QWizardPage>
+
+#include "ui/wizard.h"
+
+class QLabel;
+class QLineEdit;
+class QListWidget;
+class QPlainTextEdit;
+class QProgressBar;
+class QPushButton;
+class QSlider;
+class QTableWidget;
+class QComboBox;
+
+namespace arpos::ui {
+
+class FrameView;
+class ModelView;
+
+class CasePage : public QWizardPage {
+  Q_OBJECT
+ public:
+  CasePage(WizardState* state, QWidget* parent = nullptr);
+  void initializePage() override;
+  bool validatePage() override;
+
+ private:
+  void RunCheck();
+  void RefreshStore();
+  WizardState* state_;
+  QLineEdit* store_edit_;
+  QLineEdit* case_edit_;
+  QListWidget* problems_;
+  QPlainTextEdit* store_summary_;
+  QLabel* status_;
+};
+
+class PlanningPage : public QWizardPage {
+  Q_OBJECT
+ public:
+  PlanningPage(WizardState* state, QWidget* parent = nullptr);
+  void initializePage() override;
+
+ private:
+  void ImportCase();
+  void ShowLatestPlan();
+  WizardState* state_;
+  ModelView* model_view_;
+  QLabel* plan_label_;
+  QPushButton* import_button_;
+  QProgressBar* progress_;
+};
+
+class SessionPage : public QWizardPage {
+  Q_OBJECT
+ public:
+  SessionPage(WizardState* state, QWidget* parent = nullptr);
+  void initializePage() override;
+
+ private:
+  WizardState* state_;
+  QTableWidget* sessions_;
+  QLabel* stages_;
+};
+
+class TrackingPage : public QWizardPage {
+  Q_OBJECT
+ public:
+  TrackingPage(WizardState* state, QWidget* parent = nullptr);
+  void initializePage() override;
+
+ private:
+  void LoadSequence();
+  void ShowFrame(int index);
+  WizardState* state_;
+  QComboBox* sequences_;
+  QSlider* slider_;
+  FrameView* color_view_;
+  FrameView* depth_view_;
+  QLabel* frame_label_;
+};
+
+class AuditPage : public QWizardPage {
+  Q_OBJECT
+ public:
+  AuditPage(WizardState* state, QWidget* parent = nullptr);
+  void initializePage() override;
+
+ private:
+  void ExportReport();
+  WizardState* state_;
+  QTableWidget* table_;
+};
+
+}  // namespace arpos::ui

@@ -1,0 +1,44 @@
+#pragma once
+/// The ARPos wizard: one page per workflow stage (case and store, planning,
+/// session, tracking, audit). Pages drive the same controllers as the CLI, on
+/// a worker thread, and read the session store for what is already done.
+
+#include <QWizard>
+#include <memory>
+#include <string>
+
+namespace arpos {
+class Database;
+}
+
+namespace arpos::ui {
+
+class Worker;
+
+struct WizardSettings {
+  std::string store_path;  ///< session store file
+  std::string case_dir;    ///< preselected case folder (may be empty)
+};
+
+/// State shared by the pages: the open store and the chosen case.
+struct WizardState {
+  WizardSettings options;
+  std::unique_ptr<Database> database;
+  Worker* worker = nullptr;
+  /// (Re)opens the store at options.store_path; returns an error or "".
+  std::string OpenStore();
+};
+
+class ArposWizard : public QWizard {
+  Q_OBJECT
+ public:
+  enum PageId { kCasePage, kPlanningPage, kSessionPage, kTrackingPage, kAuditPage };
+  explicit ArposWizard(WizardSettings options, QWidget* parent = nullptr);
+  ~ArposWizard() override;
+  WizardState& state() { return *state_; }
+
+ private:
+  std::unique_ptr<WizardState> state_;
+};
+
+}  // namespace arpos::ui
