@@ -3,6 +3,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <set>
 
+#include "geometry/mesh_io.h"
 #include "geometry/rigid3.h"
 #include "sensor/case_config.h"
 #include "sensor/case_folder.h"
@@ -111,6 +112,24 @@ class Checker {
     std::error_code ec;
     if (fs::file_size(model, ec) == 0 || ec) {
       Error(model.filename().string(), "empty file");
+      return;
+    }
+    try {
+      const TriangleMesh mesh = LoadTriangleMesh(model);
+      Eigen::Vector3f lo, hi;
+      mesh.Bounds(&lo, &hi);
+      const double extent_m = (hi - lo).maxCoeff();
+      if (extent_m > 3.0) {
+        Error(model.filename().string(),
+              StringPrintf("extends %.1f units: a body surface in metres spans 0.05-3 (is it in "
+                           "millimetres? convert it with arpos import-model --units mm)",
+                           extent_m));
+      } else if (extent_m < 0.05) {
+        Error(model.filename().string(),
+              StringPrintf("extends only %.4f m: too small for a body surface in metres", extent_m));
+      }
+    } catch (const std::exception& e) {
+      ErrorFromException(model.filename().string(), e);
     }
   }
 

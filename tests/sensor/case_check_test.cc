@@ -89,6 +89,16 @@ TEST_F(CaseCheckTest, TargetPoseNotRigid) {
   ExpectError("target_pose.txt", "expected a 4x4 matrix (16 numbers, row-major), found 12");
 }
 
+TEST_F(CaseCheckTest, ReferenceModelInMillimetres) {
+  // The same tetrahedron scaled to millimetres.
+  WriteFileAtomic(root() / "reference_model.ply",
+                  "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
+                  "end_header\n0 0 0\n100 0 0\n0 100 0\n0 0 100\n3 0 2 1\n3 0 1 3\n3 0 3 2\n"
+                  "3 1 2 3\n");
+  ExpectError("reference_model.ply", "is it in millimetres?");
+}
+
 TEST_F(CaseCheckTest, BadYamlKeyIsNamed) {
   std::string yaml = ReadTextFile(root() / "case.yaml");
   yaml.replace(yaml.find("fx:"), 3, "fq:");
