@@ -22,6 +22,10 @@
 #ifdef ARPOS_HAVE_IMPORT_MODEL
 #include "exe/cmd_import_model.h"
 #endif
+#ifdef ARPOS_HAVE_PLANNING
+#include "exe/cmd_localize.h"
+#include "exe/cmd_plan.h"
+#endif
 
 namespace {
 
@@ -41,6 +45,11 @@ const std::vector<Command>& Commands() {
 #ifdef ARPOS_HAVE_IMPORT_MODEL
       {"import-model", "import the reference body surface (mesh, CT series, RTSTRUCT)",
        arpos::RunImportModelCommand},
+#endif
+#ifdef ARPOS_HAVE_PLANNING
+      {"plan", "build the room map from a case's room/ sequence and store it", arpos::RunPlanCommand},
+      {"localize", "camera pose of every frame of a sequence against the stored room map",
+       arpos::RunLocalizeCommand},
 #endif
 #ifdef ARPOS_HAVE_SIMULATE
       {"simulate", "write a synthetic case folder with exact ground truth", arpos::RunSimulateCommand},

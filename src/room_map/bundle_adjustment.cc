@@ -1,0 +1,272 @@
+#include "room_map/bundle_adjustment.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+
+#include "features/marker_pose.h"
+#include "util/check.h"
+
+namespace arpos {
+
+std::string BaOptions::Validate() const {
+  std::ostringstream out;
+  if (!(huber > 0)) out << "huber must be positive";
+  else if (!(depth_sigma_const_m >= 0 && depth_sigma_quad_per_m >= 0 &&
+             depth_sigma_const_m + depth_sigma_quad_per_m > 0))
+    out << "depth sigmas must be non-negative and not both zero";
+  else if (marker_depth_max_effective < 1) out << "marker_depth_max_effective must be at least 1";
+  else if (max_iterations < 1) out << "max_iterations must be at least 1";
+  else if (threads < 1) out << "threads must be at least 1";
+  return out.str();
+}
+
+bool BaOptions::Check(std::string* reason) const {
+  const std::string r = Validate();
+  if (reason) *reason = r;
+  return r.empty();
+}
+
+namespace {
+
+// Pose blocks: quaternion (x, y, z, w: Eigen's memory order) and translation.
+struct PoseBlock {
+  double q[4];
+  double t[3];
+  void Set(const Rigid3d& pose) {
+    const Eigen::Quaterniond n = pose.rotation.normalized();
+    q[0] = n.x();
+    q[1] = n.y();
+    q[2] = n.z();
+    q[3] = n.w();
+    for (int k = 0; k < 3; ++k) t[k] = pose.translation[k];
+  }
+  Rigid3d Get() const {
+    return Rigid3d(Eigen::Quaterniond(q[3], q[0], q[1], q[2]), Eigen::Vector3d(t[0], t[1], t[2]));
+  }
+};
+
+template <typename T>
+Eigen::Matrix<T, 3, 1> Transform(const T* q, const T* t, const Eigen::Matrix<T, 3, 1>& p) {
+  const Eigen::Map<const Eigen::Quaternion<T>> quat(q);
+  return quat * p + Eigen::Map<const Eigen::Matrix<T, 3, 1>>(t);
+}
+
+struct MarkerCornerCost {
+  MarkerCornerCost(const CameraIntrinsics& k, const Eigen::Vector3d& corner_in_marker,
+                   const Eigen::Vector2d& observed, double sigma)
+      : fx(k.fx), fy(k.fy), cx(k.cx), cy(k.cy), corner(corner_in_marker), obs(observed),
+        inv_sigma(1.0 / sigma) {}
+  template <typename T>
+  bool operator()(const T* cq, const T* ct, const T* mq, const T* mt, T* residual) const {
+    const Eigen::Matrix<T, 3, 1> in_room = Transform(mq, mt, corner.cast<T>().eval());
+    const Eigen::Matrix<T, 3, 1> p = Transform(cq, ct, in_room);
+    residual[0] = (T(fx) * p.x() / p.z() + T(cx) - T(obs.x())) * T(inv_sigma);
+    residual[1] = (T(fy) * p.y() / p.z() + T(cy) - T(obs.y())) * T(inv_sigma);
+    return true;
+  }
+  double fx, fy, cx, cy;
+  Eigen::Vector3d corner;
+  Eigen::Vector2d obs;
+  double inv_sigma;
+};
+
+struct MarkerDepthCost {
+  MarkerDepthCost(const CameraIntrinsics& k, const DepthSample& s, double weight_over_sigma)
+      : ray((s.pixel.x() - k.cx) / k.fx, (s.pixel.y() - k.cy) / k.fy, 1.0), z(s.depth_m),
+        w(weight_over_sigma) {}
+  template <typename T>
+  bool operator()(const T* cq, const T* ct, const T* mq, const T* mt, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> camera_q(cq), marker_q(mq);
+    const Eigen::Matrix<T, 3, 1> normal = camera_q * (marker_q * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1)));
+    const Eigen::Matrix<T, 3, 1> centre = Transform(cq, ct, Eigen::Map<const Eigen::Matrix<T, 3, 1>>(mt).eval());
+    const T denom = normal.dot(ray.cast<T>());
+    residual[0] = (normal.dot(centre) / denom - T(z)) * T(w);
+    return true;
+  }
+  Eigen::Vector3d ray;
+  double z, w;
+};
+
+struct KeypointCost {
+  KeypointCost(const CameraIntrinsics& k, const Eigen::Vector2d& observed, double sigma)
+      : fx(k.fx), fy(k.fy), cx(k.cx), cy(k.cy), obs(observed), inv_sigma(1.0 / sigma) {}
+  template <typename T>
+  bool operator()(const T* cq, const T* ct, const T* point, T* residual) const {
+    const Eigen::Matrix<T, 3, 1> p = Transform(cq, ct, Eigen::Map<const Eigen::Matrix<T, 3, 1>>(point).eval());
+    residual[0] = (T(fx) * p.x() / p.z() + T(cx) - T(obs.x())) * T(inv_sigma);
+    residual[1] = (T(fy) * p.y() / p.z() + T(cy) - T(obs.y())) * T(inv_sigma);
+    return true;
+  }
+  double fx, fy, cx, cy;
+  Eigen::Vector2d obs;
+  double inv_sigma;
+};
+
+struct KeypointDepthCost {
+  KeypointDepthCost(double depth_m, double sigma_m) : z(depth_m), inv_sigma(1.0 / sigma_m) {}
+  template <typename T>
+  bool operator()(const T* cq, const T* ct, const T* point, T* residual) const {
+    const Eigen::Matrix<T, 3, 1> p = Transform(cq, ct, Eigen::Map<const Eigen::Matrix<T, 3, 1>>(point).eval());
+    residual[0] = (p.z() - T(z)) * T(inv_sigma);
+    return true;
+  }
+  double z, inv_sigma;
+};
+
+}  // namespace
+
+BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
+  ARPOS_CHECK(problem != nullptr, "no problem given");
+  std::string reason;
+  ARPOS_CHECK(options.Check(&reason), "invalid bundle adjustment options: " << reason);
+  BaProblem& P = *problem;
+  ARPOS_CHECK(P.marker_fixed.size() == P.room_from_marker.size(), "marker_fixed size mismatch");
+  const auto start = std::chrono::steady_clock::now();
+
+  std::vector<PoseBlock> cameras(P.camera_from_room.size()), markers(P.room_from_marker.size());
+  for (size_t i = 0; i < cameras.size(); ++i) cameras[i].Set(P.camera_from_room[i]);
+  for (size_t i = 0; i < markers.size(); ++i) markers[i].Set(P.room_from_marker[i]);
+
+  ceres::Problem::Options problem_options;
+  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem cp(problem_options);
+  ceres::EigenQuaternionManifold quaternion_manifold;
+  ceres::HuberLoss huber(options.huber);
+
+  const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(P.marker_size_m);
+  std::vector<bool> camera_used(cameras.size(), false), marker_used(markers.size(), false);
+  for (const auto& o : P.marker_observations) {
+    ARPOS_CHECK(o.camera >= 0 && o.camera < static_cast<int>(cameras.size()) && o.marker >= 0 &&
+                    o.marker < static_cast<int>(markers.size()),
+                "marker observation with a bad index");
+    PoseBlock& c = cameras[o.camera];
+    PoseBlock& m = markers[o.marker];
+    for (int k = 0; k < 4; ++k) {
+      auto* cost = new ceres::AutoDiffCostFunction<MarkerCornerCost, 2, 4, 3, 4, 3>(
+          new MarkerCornerCost(P.intrinsics, in_marker[k], o.corners_px[k], o.sigma_px[k]));
+      cp.AddResidualBlock(cost, &huber, c.q, c.t, m.q, m.t);
+    }
+    if (options.use_marker_depth && !o.depth_samples.empty()) {
+      const double n = static_cast<double>(o.depth_samples.size());
+      const double share = std::sqrt(std::min(1.0, options.marker_depth_max_effective / n));
+      for (const auto& s : o.depth_samples) {
+        const double sigma = options.DepthSigmaM(s.depth_m);
+        auto* cost = new ceres::AutoDiffCostFunction<MarkerDepthCost, 1, 4, 3, 4, 3>(
+            new MarkerDepthCost(P.intrinsics, s, share / sigma));
+        cp.AddResidualBlock(cost, &huber, c.q, c.t, m.q, m.t);
+      }
+    }
+    camera_used[o.camera] = true;
+    marker_used[o.marker] = true;
+  }
+  std::vector<bool> landmark_used(P.landmarks_in_room.size(), false);
+  for (const auto& o : P.keypoint_observations) {
+    ARPOS_CHECK(o.camera >= 0 && o.camera < static_cast<int>(cameras.size()) && o.landmark >= 0 &&
+                    o.landmark < static_cast<int>(P.landmarks_in_room.size()),
+                "keypoint observation with a bad index");
+    PoseBlock& c = cameras[o.camera];
+    double* point = P.landmarks_in_room[o.landmark].data();
+    cp.AddResidualBlock(new ceres::AutoDiffCostFunction<KeypointCost, 2, 4, 3, 3>(
+                            new KeypointCost(P.intrinsics, o.pixel, o.sigma_px)),
+                        &huber, c.q, c.t, point);
+    if (options.use_keypoint_depth && o.depth_m > 0) {
+      cp.AddResidualBlock(new ceres::AutoDiffCostFunction<KeypointDepthCost, 1, 4, 3, 3>(
+                              new KeypointDepthCost(o.depth_m, options.DepthSigmaM(o.depth_m))),
+                          &huber, c.q, c.t, point);
+    }
+    camera_used[o.camera] = true;
+    landmark_used[o.landmark] = true;
+  }
+  for (size_t i = 0; i < cameras.size(); ++i) {
+    if (camera_used[i]) cp.SetManifold(cameras[i].q, &quaternion_manifold);
+  }
+  for (size_t i = 0; i < markers.size(); ++i) {
+    if (!marker_used[i]) continue;
+    if (P.marker_fixed[i]) {
+      cp.SetParameterBlockConstant(markers[i].q);
+      cp.SetParameterBlockConstant(markers[i].t);
+    } else {
+      cp.SetManifold(markers[i].q, &quaternion_manifold);
+    }
+  }
+
+  BaSummary summary;
+  if (cp.NumResidualBlocks() == 0) {
+    summary.message = "nothing to optimise";
+    return summary;
+  }
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::SPARSE_SCHUR;
+  so.max_num_iterations = options.max_iterations;
+  so.num_threads = options.threads;
+  so.function_tolerance = options.function_tolerance;
+  so.logging_type = ceres::SILENT;
+  so.minimizer_progress_to_stdout = false;
+  ceres::Solver::Summary cs;
+  ceres::Solve(so, &cp, &cs);
+
+  summary.usable = cs.IsSolutionUsable();
+  summary.iterations = static_cast<int>(cs.iterations.size());
+  summary.initial_cost = cs.initial_cost;
+  summary.final_cost = cs.final_cost;
+  summary.message = cs.BriefReport();
+  if (summary.usable) {
+    for (size_t i = 0; i < cameras.size(); ++i) {
+      if (camera_used[i]) P.camera_from_room[i] = cameras[i].Get();
+    }
+    for (size_t i = 0; i < markers.size(); ++i) {
+      if (marker_used[i] && !P.marker_fixed[i]) P.room_from_marker[i] = markers[i].Get();
+    }
+  }
+  summary.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+BaResiduals ComputeBaResiduals(const BaProblem& P) {
+  BaResiduals out;
+  const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(P.marker_size_m);
+  const CameraIntrinsics& k = P.intrinsics;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (const auto& o : P.marker_observations) {
+    const Rigid3d camera_from_marker = P.camera_from_room[o.camera] * P.room_from_marker[o.marker];
+    double sum = 0;
+    for (int c = 0; c < 4; ++c) {
+      sum += (k.Project(camera_from_marker * in_marker[c]) - o.corners_px[c]).squaredNorm();
+    }
+    out.marker_rms_px.push_back(std::sqrt(sum / 4));
+    if (o.depth_samples.empty()) {
+      out.marker_depth_ratio.push_back(nan);
+      continue;
+    }
+    const Eigen::Vector3d normal = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
+    const double d = normal.dot(camera_from_marker.translation);
+    std::vector<double> ratios;
+    for (const auto& s : o.depth_samples) {
+      const Eigen::Vector3d ray((s.pixel.x() - k.cx) / k.fx, (s.pixel.y() - k.cy) / k.fy, 1.0);
+      const double z = d / normal.dot(ray);
+      if (z > 0) ratios.push_back(s.depth_m / z);
+    }
+    if (ratios.empty()) {
+      out.marker_depth_ratio.push_back(nan);
+    } else {
+      std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+      out.marker_depth_ratio.push_back(ratios[ratios.size() / 2]);
+    }
+  }
+  for (const auto& o : P.keypoint_observations) {
+    const Eigen::Vector3d p = P.camera_from_room[o.camera] * P.landmarks_in_room[o.landmark];
+    out.keypoint_px.push_back(p.z() > 0 ? (k.Project(p) - o.pixel).norm() : 1e9);
+    out.keypoint_depth_m.push_back(o.depth_m > 0 ? p.z() - o.depth_m : nan);
+  }
+  return out;
+}
+
+}  // namespace arpos

@@ -1,0 +1,535 @@
+#include "room_map/camera_localizer.h"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "geometry/so3.h"
+#include "room_map/camera_response.h"
+#include "util/check.h"
+#include "util/string_util.h"
+
+namespace arpos {
+namespace {
+
+double ThreadCpuMs() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+// Adds the elapsed thread CPU time since `*mark` to `*bucket`, then resets the mark.
+void Lap(double* mark, double* bucket) {
+  const double now = ThreadCpuMs();
+  *bucket += now - *mark;
+  *mark = now;
+}
+
+}  // namespace
+
+const char* LocalizationStatusName(LocalizationStatus status) {
+  switch (status) {
+    case LocalizationStatus::kTracked: return "tracked";
+    case LocalizationStatus::kRelocalized: return "relocalized";
+    case LocalizationStatus::kLost: return "lost";
+  }
+  return "unknown";
+}
+
+std::string CameraLocalizerOptions::Validate() const {
+  std::ostringstream out;
+  std::string r;
+  if (!detector.Check(&r)) out << "detector: " << r;
+  else if (!marker_pose.Check(&r)) out << "marker_pose: " << r;
+  else if (!keypoints.Check(&r)) out << "keypoints: " << r;
+  else if (!refiner.Check(&r)) out << "refiner: " << r;
+  else if (!use_markers && !use_keypoints) out << "at least one of markers and keypoints must be used";
+  else if (!(window_margin_px >= 0) || !(window_margin_fraction >= 0)) out << "window margins must not be negative";
+  else if (!(marker_corner_sigma_px > 0) || !(keypoint_sigma_px > 0)) out << "pixel sigmas must be positive";
+  else if (!(depth_sigma_const_m >= 0 && depth_sigma_quad_per_m >= 0 && depth_sigma_const_m + depth_sigma_quad_per_m > 0))
+    out << "depth sigmas must be non-negative and not both zero";
+  else if (!(search_radius_px > 0) || !(refined_search_radius_px > 0)) out << "search radii must be positive";
+  else if (max_hamming < 1 || max_hamming > 256 || relocalisation_max_hamming < 1 || relocalisation_max_hamming > 256)
+    out << "Hamming thresholds must be in 1..256";
+  else if (!(match_ratio > 0 && match_ratio <= 1) || !(relocalisation_ratio > 0 && relocalisation_ratio <= 1))
+    out << "match ratios must be in (0, 1]";
+  else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
+  else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
+  else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
+  else if (min_marker_corners < 4 || min_keypoints < 6) out << "min_marker_corners must be >= 4 and min_keypoints >= 6";
+  else if (!(max_marker_rms_px > 0) || !(max_keypoint_rms_px > 0)) out << "RMS bounds must be positive";
+  return out.str();
+}
+
+bool CameraLocalizerOptions::Check(std::string* reason) const {
+  const std::string r = Validate();
+  if (reason) *reason = r;
+  return r.empty();
+}
+
+CameraLocalizerOptions MakeCameraLocalizerOptions(const CaseConfig& config) {
+  CameraLocalizerOptions options;
+  options.detector.dictionary = config.dictionary;
+  options.detector.id_ranges = {{config.room_markers.id_min, config.room_markers.id_max}};
+  options.detector.intrinsics = config.camera;
+  return options;
+}
+
+struct CameraLocalizer::Impl {
+  const RoomMap& map;
+  CameraIntrinsics K;
+  const CameraLocalizerOptions& options;
+  bool distortion = false;
+  std::unique_ptr<MarkerDetector> detector;
+  KeypointExtractor extractor;
+  KeypointGrid grid;
+
+  // Per-frame scratch.
+  cv::Mat gray;
+  cv::Mat marker_image;  // gray, linearised if asked
+  KeypointSet keypoints;
+  std::vector<Eigen::Vector2d> keypoint_px;  // ideal pixels
+  std::vector<MarkerObservation> markers;    // map markers in this frame (image pixels)
+  std::vector<std::array<Eigen::Vector2d, 4>> marker_px;  // ideal pixels, parallel
+  std::vector<MarkerObservation> scratch;
+  PoseCorrespondences corr;
+  std::vector<int> match_of_keypoint;        // landmark per keypoint, -1
+  std::vector<int> match_distance;
+
+  // Motion model.
+  int frames_lost = 1 << 20;
+  bool have_last = false, have_prev = false;
+  Rigid3d last_camera_from_room, prev_camera_from_room;
+  double last_t = 0, prev_t = 0;
+
+  Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
+      : map(m), K(k), options(o), extractor(o.keypoints) {
+    distortion = K.HasDistortion();
+    MarkerDetectorOptions d = options.detector;
+    d.intrinsics = distortion ? std::optional<CameraIntrinsics>(K) : std::nullopt;
+    detector = std::make_unique<MarkerDetector>(d);
+  }
+
+  double DepthSigma(double z) const {
+    return options.depth_sigma_const_m + options.depth_sigma_quad_per_m * z * z;
+  }
+
+  std::vector<Eigen::Vector2d> Ideal(const std::vector<Eigen::Vector2d>& px) const {
+    if (!distortion || px.empty()) return px;
+    std::vector<cv::Point2d> in, out;
+    for (const auto& p : px) in.emplace_back(p.x(), p.y());
+    cv::undistortPoints(in, out, K.CvK(), K.CvDistortion(), cv::noArray(), K.CvK());
+    std::vector<Eigen::Vector2d> r;
+    for (const auto& p : out) r.emplace_back(p.x, p.y);
+    return r;
+  }
+
+  void AcceptMarker(const MarkerObservation& obs) {
+    if (map.FindMarker(obs.id) == nullptr) return;
+    if (obs.status != MarkerStatus::kRefined && obs.status != MarkerStatus::kPartiallyOccluded) return;
+    for (const auto& m : markers) {
+      if (m.id == obs.id) return;
+    }
+    markers.push_back(obs);
+    const std::vector<Eigen::Vector2d> ideal = Ideal({obs.corners_px.begin(), obs.corners_px.end()});
+    marker_px.push_back({ideal[0], ideal[1], ideal[2], ideal[3]});
+  }
+
+  void DetectFull() {
+    detector->Detect(marker_image, &scratch);
+    for (const auto& o : scratch) AcceptMarker(o);
+  }
+
+  // Searches each map marker the predicted pose puts in view in a window.
+  void DetectInWindows(const Rigid3d& camera_from_room) {
+    for (const auto& m : map.markers) {
+      std::array<Eigen::Vector2d, 4> px;
+      bool ok = true;
+      double min_u = 1e9, min_v = 1e9, max_u = -1e9, max_v = -1e9, perimeter = 0;
+      for (int c = 0; c < 4 && ok; ++c) {
+        const Eigen::Vector3d p = camera_from_room * m.corners_in_room[c];
+        if (p.z() < 0.1) ok = false;
+        px[c] = K.Project(p);
+      }
+      if (!ok) continue;
+      const Eigen::Vector3d centre = camera_from_room * m.room_from_marker.translation;
+      const Eigen::Vector3d normal = camera_from_room.rotation * (m.room_from_marker.rotation * Eigen::Vector3d::UnitZ());
+      if (normal.dot(centre) > -0.15 * centre.norm()) continue;  // edge-on or from behind
+      for (int c = 0; c < 4; ++c) {
+        min_u = std::min(min_u, px[c].x());
+        max_u = std::max(max_u, px[c].x());
+        min_v = std::min(min_v, px[c].y());
+        max_v = std::max(max_v, px[c].y());
+        perimeter += (px[(c + 1) % 4] - px[c]).norm();
+      }
+      const double side = perimeter / 4;
+      if (side < options.min_marker_side_px) continue;
+      if (min_u < 2 || min_v < 2 || max_u > K.width - 3 || max_v > K.height - 3) continue;
+      const double margin = std::max(options.window_margin_px, options.window_margin_fraction * side);
+      const int x0 = std::max(0, static_cast<int>(std::floor(min_u - margin)));
+      const int y0 = std::max(0, static_cast<int>(std::floor(min_v - margin)));
+      const int x1 = std::min(gray.cols, static_cast<int>(std::ceil(max_u + margin)) + 1);
+      const int y1 = std::min(gray.rows, static_cast<int>(std::ceil(max_v + margin)) + 1);
+      if (x1 - x0 < 16 || y1 - y0 < 16) continue;
+      bool found = false;
+      for (const auto& already : markers) found |= already.id == m.id;
+      if (found) continue;
+      detector->Detect(marker_image(cv::Rect(x0, y0, x1 - x0, y1 - y0)), &scratch);
+      for (auto o : scratch) {
+        for (int c = 0; c < 4; ++c) {
+          o.corners_px[c] += Eigen::Vector2d(x0, y0);
+          o.detected_corners_px[c] += Eigen::Vector2d(x0, y0);
+        }
+        AcceptMarker(o);
+      }
+    }
+  }
+
+  void ExtractKeypoints(const RgbdFrame& frame) {
+    extractor.Extract(gray, frame.depth, frame.depth_scale, &keypoints);
+    std::vector<Eigen::Vector2d> px;
+    px.reserve(keypoints.size());
+    for (const auto& k : keypoints.keypoints) px.emplace_back(k.pt.x, k.pt.y);
+    keypoint_px = Ideal(px);
+    grid.Build(keypoints, 16);
+  }
+
+  // Matches landmarks the pose puts in view to keypoints near their
+  // predicted pixels. Returns the number of matches; fills match_of_keypoint.
+  int SearchByProjection(const Rigid3d& camera_from_room, double radius_px) {
+    const int n_kp = static_cast<int>(keypoints.size());
+    match_of_keypoint.assign(n_kp, -1);
+    match_distance.assign(n_kp, 257);
+    if (n_kp == 0 || map.landmarks_in_room.empty()) return 0;
+    const Eigen::Matrix3d R = camera_from_room.RotationMatrix();
+    const Eigen::Vector3d t = camera_from_room.translation;
+    const int border = options.keypoints.border_px - 2;
+    for (int l = 0; l < map.num_landmarks(); ++l) {
+      const Eigen::Vector3d p = R * map.landmarks_in_room[l] + t;
+      if (p.z() < 0.1) continue;
+      const double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
+      if (u < border || v < border || u >= K.width - border || v >= K.height - border) continue;
+      const std::uint8_t* d = map.landmark_descriptors.ptr<std::uint8_t>(l);
+      const double max_dz = std::max(0.05, 5 * DepthSigma(p.z()));
+      int best = -1, d1 = 257, d2 = 257;
+      grid.ForEachInRadius(u, v, radius_px, [&](int i) {
+        const float z = keypoints.depth_m[i];
+        if (z > 0 && std::abs(z - p.z()) > max_dz) return;
+        const int dist = HammingDistance32(d, keypoints.descriptors.ptr<std::uint8_t>(i));
+        if (dist < d1) {
+          d2 = d1;
+          d1 = dist;
+          best = i;
+        } else if (dist < d2) {
+          d2 = dist;
+        }
+      });
+      if (best < 0 || d1 > options.max_hamming) continue;
+      if (d2 <= 256 && d1 > options.match_ratio * d2) continue;
+      if (d1 < match_distance[best]) {
+        match_distance[best] = d1;
+        match_of_keypoint[best] = l;
+      }
+    }
+    int n = 0;
+    for (int i = 0; i < n_kp; ++i) n += match_of_keypoint[i] >= 0;
+    return n;
+  }
+
+  // Brute-force matching against the whole map (relocalisation).
+  int MatchGlobally() {
+    const int n_kp = static_cast<int>(keypoints.size());
+    match_of_keypoint.assign(n_kp, -1);
+    match_distance.assign(n_kp, 257);
+    int n = 0;
+    for (int i = 0; i < n_kp; ++i) {
+      const std::uint8_t* d = keypoints.descriptors.ptr<std::uint8_t>(i);
+      int best = -1, d1 = 257, d2 = 257;
+      for (int l = 0; l < map.num_landmarks(); ++l) {
+        const int dist = HammingDistance32(d, map.landmark_descriptors.ptr<std::uint8_t>(l));
+        if (dist < d1) {
+          d2 = d1;
+          d1 = dist;
+          best = l;
+        } else if (dist < d2) {
+          d2 = dist;
+        }
+      }
+      if (best < 0 || d1 > options.relocalisation_max_hamming || d1 > options.relocalisation_ratio * d2) continue;
+      match_of_keypoint[i] = best;
+      match_distance[i] = d1;
+      ++n;
+    }
+    return n;
+  }
+
+  void BuildCorrespondences() {
+    corr.clear();
+    corr.reserve(4 * markers.size() + keypoints.size());
+    for (size_t m = 0; m < markers.size(); ++m) {
+      const RoomMapMarkerEntry* entry = map.FindMarker(markers[m].id);
+      const double floor = markers[m].status == MarkerStatus::kRefined ? options.marker_corner_sigma_px
+                                                                       : 4 * options.marker_corner_sigma_px;
+      for (int c = 0; c < 4; ++c) {
+        corr.Add(entry->corners_in_room[c], marker_px[m][c], std::max(floor, markers[m].corner_sigma_px[c]),
+                 CorrespondenceGroup::kMarker, static_cast<int>(m) * 4 + c);
+      }
+    }
+    for (size_t i = 0; i < match_of_keypoint.size(); ++i) {
+      const int l = match_of_keypoint[i];
+      if (l < 0) continue;
+      const float z = keypoints.depth_m[i];
+      const bool depth = options.use_keypoint_depth && z > 0;
+      corr.Add(map.landmarks_in_room[l], keypoint_px[i], options.keypoint_sigma_px, CorrespondenceGroup::kKeypoint,
+               static_cast<int>(i), depth ? z : 0.0, depth ? DepthSigma(z) : 0.0);
+    }
+  }
+
+  // Hypotheses without a prediction: single-marker poses (IPPE + depth),
+  // then PnP + RANSAC on global keypoint matches. Returns camera_from_room.
+  std::optional<Rigid3d> Relocalise(const RgbdFrame& frame, double* pnp_ms, double* matching_ms, double* mark) {
+    std::optional<Rigid3d> best;
+    double best_rms = std::numeric_limits<double>::infinity();
+    // Marker hypotheses, scored over all detected map-marker corners.
+    for (size_t m = 0; m < markers.size(); ++m) {
+      if (markers[m].status != MarkerStatus::kRefined) continue;
+      const RoomMapMarkerEntry* entry = map.FindMarker(markers[m].id);
+      const MarkerPose pose = EstimateMarkerPose(markers[m], map.marker_size_m, K, frame.depth, options.marker_pose);
+      if (pose.status != MarkerPoseStatus::kOk) continue;
+      const Rigid3d camera_from_room = pose.camera_from_marker * entry->room_from_marker.Inverse();
+      double sum = 0;
+      int n = 0;
+      for (size_t k = 0; k < markers.size(); ++k) {
+        const RoomMapMarkerEntry* e = map.FindMarker(markers[k].id);
+        for (int c = 0; c < 4; ++c) {
+          const Eigen::Vector3d p = camera_from_room * e->corners_in_room[c];
+          if (p.z() <= 0) continue;
+          sum += std::min(100.0, (K.Project(p) - marker_px[k][c]).squaredNorm());
+          ++n;
+        }
+      }
+      const double rms = n ? std::sqrt(sum / n) : std::numeric_limits<double>::infinity();
+      if (rms < best_rms) {
+        best_rms = rms;
+        best = camera_from_room;
+      }
+    }
+    Lap(mark, pnp_ms);
+    if (best) return best;
+    if (!options.use_keypoints || keypoints.size() < 6 || map.landmarks_in_room.empty()) return std::nullopt;
+    const int n_matches = MatchGlobally();
+    Lap(mark, matching_ms);
+    if (n_matches < options.min_keypoints) return std::nullopt;
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    for (size_t i = 0; i < match_of_keypoint.size(); ++i) {
+      const int l = match_of_keypoint[i];
+      if (l < 0) continue;
+      const Eigen::Vector3d& X = map.landmarks_in_room[l];
+      object.emplace_back(X.x(), X.y(), X.z());
+      image.emplace_back(keypoint_px[i].x(), keypoint_px[i].y());
+    }
+    cv::Mat rvec, tvec;
+    std::vector<int> inliers;
+    const bool ok = cv::solvePnPRansac(object, image, K.CvK(), cv::noArray(), rvec, tvec, false,
+                                       options.ransac_iterations, static_cast<float>(options.ransac_threshold_px),
+                                       0.999, inliers, cv::SOLVEPNP_AP3P);
+    Lap(mark, pnp_ms);
+    if (!ok || static_cast<int>(inliers.size()) < options.min_keypoints) return std::nullopt;
+    const Eigen::Vector3d rv(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
+    const Eigen::Vector3d tv(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+    return Rigid3d::FromRotationVector(rv, tv);
+  }
+
+  std::optional<Rigid3d> Predict(double t) const {
+    if (!have_last || frames_lost > options.max_frames_lost_before_relocalising) return std::nullopt;
+    if (!have_prev || !(last_t > prev_t)) return last_camera_from_room;
+    // Constant velocity: delta per second, applied over t - last_t.
+    const Rigid3d delta = last_camera_from_room * prev_camera_from_room.Inverse();
+    const double s = std::clamp((t - last_t) / (last_t - prev_t), 0.0, 3.0);
+    const Eigen::Vector3d w = RotationVectorFromQuaternion(delta.rotation) * s;
+    const Rigid3d scaled(QuaternionFromRotationVector(w), delta.translation * s);
+    return scaled * last_camera_from_room;
+  }
+
+  // Refines from `initial` with matching by projection at `radius`, then at
+  // the refined pose again with the small radius. Returns the last refinement.
+  PoseRefinementResult Track(const Rigid3d& initial, double radius, const std::optional<PosePrior>& prior,
+                             double* matching_ms, double* refinement_ms, double* mark) {
+    if (options.use_keypoints) SearchByProjection(initial, radius);
+    Lap(mark, matching_ms);
+    BuildCorrespondences();
+    PoseRefinementResult r = RefineCameraPose(corr, K, initial, options.refiner, prior);
+    Lap(mark, refinement_ms);
+    if (options.use_keypoints && !map.landmarks_in_room.empty()) {
+      SearchByProjection(r.camera_from_room, options.refined_search_radius_px);
+      Lap(mark, matching_ms);
+      BuildCorrespondences();
+      r = RefineCameraPose(corr, K, r.camera_from_room, options.refiner, prior);
+      Lap(mark, refinement_ms);
+    }
+    return r;
+  }
+
+  bool Accept(const PoseRefinementResult& r, LocalizationResult* out) const {
+    // Markers used: all four corners inliers.
+    int full = 0;
+    for (size_t m = 0; m < markers.size(); ++m) {
+      int in = 0;
+      for (size_t i = 0; i < corr.size(); ++i) {
+        if (corr.group[i] == CorrespondenceGroup::kMarker && corr.tag[i] / 4 == static_cast<int>(m)) in += r.inlier[i];
+      }
+      full += in == 4;
+    }
+    out->markers_used = full;
+    out->keypoints_used = r.keypoint_inliers;
+    out->rms_px = r.rms_px;
+    out->marker_rms_px = r.marker_rms_px;
+    out->keypoint_rms_px = r.keypoint_rms_px;
+    const bool by_markers = r.marker_inliers >= options.min_marker_corners && full >= 1 &&
+                            r.marker_rms_px <= options.max_marker_rms_px;
+    const bool by_keypoints =
+        r.keypoint_inliers >= options.min_keypoints && r.keypoint_rms_px <= options.max_keypoint_rms_px;
+    // Markers that disagree badly with an otherwise keypoint-based pose would
+    // mean a wrong pose or a moved marker: require consistency when both exist.
+    if (by_keypoints && r.marker_inliers > 0 && r.marker_rms_px > 2 * options.max_marker_rms_px) return false;
+    return by_markers || by_keypoints;
+  }
+};
+
+CameraLocalizer::CameraLocalizer(RoomMap map, const CameraIntrinsics& intrinsics,
+                                 const CameraLocalizerOptions& options)
+    : map_(std::move(map)), options_(options) {
+  std::string reason;
+  ARPOS_CHECK(options_.Check(&reason), "invalid localiser options: " << reason);
+  const std::string bad = intrinsics.Validate();
+  ARPOS_CHECK(bad.empty(), "invalid intrinsics: " << bad);
+  const std::string problem = map_.Validate();
+  if (!problem.empty()) ARPOS_INPUT_ERROR("the room map cannot be used: " << problem);
+  impl_ = std::make_unique<Impl>(map_, intrinsics, options_);
+}
+
+CameraLocalizer::~CameraLocalizer() = default;
+
+void CameraLocalizer::Reset() {
+  impl_->have_last = impl_->have_prev = false;
+  impl_->frames_lost = 1 << 20;
+}
+
+LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame) { return Run(frame, nullptr); }
+
+LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame,
+                                             const std::vector<MarkerObservation>& detections) {
+  return Run(frame, &detections);
+}
+
+LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
+                                        const std::vector<MarkerObservation>* detections) {
+  Impl& m = *impl_;
+  const bool given = detections != nullptr;
+  LocalizationResult out;
+  LocalizationTimings& tm = out.timings;
+  const double start = ThreadCpuMs();
+  double mark = start;
+  ARPOS_CHECK(frame.color.type() == CV_8UC3 || frame.color.type() == CV_8UC1,
+              "Localize needs a CV_8UC3 (BGR) or CV_8UC1 image, got type " << frame.color.type());
+  ARPOS_CHECK(frame.color.cols == m.K.width && frame.color.rows == m.K.height,
+              "frame is " << frame.color.cols << "x" << frame.color.rows << ", the camera "
+                          << m.K.width << "x" << m.K.height);
+  ARPOS_CHECK(frame.depth.empty() || (frame.depth.type() == CV_16UC1 && frame.depth.size() == frame.color.size()),
+              "depth must be CV_16UC1 of the colour image's size");
+  if (frame.color.type() == CV_8UC3) {
+    cv::cvtColor(frame.color, m.gray, cv::COLOR_BGR2GRAY);
+  } else {
+    m.gray = frame.color;
+  }
+  if (options_.use_keypoints) {
+    m.ExtractKeypoints(frame);
+  } else {
+    m.keypoints.clear();
+    m.keypoint_px.clear();
+  }
+  Lap(&mark, &tm.keypoints_ms);
+
+  const std::optional<Rigid3d> predicted = m.Predict(frame.timestamp_s);
+  if (options_.use_markers && !given) {
+    if (options_.linearize_srgb) {
+      LinearizeSrgb(m.gray, &m.marker_image);
+    } else {
+      m.marker_image = m.gray;
+    }
+  }
+  m.markers.clear();
+  m.marker_px.clear();
+  bool full_detection_done = false;
+  if (options_.use_markers) {
+    if (given) {
+      for (const auto& o : *detections) m.AcceptMarker(o);
+      full_detection_done = true;
+    } else if (predicted && options_.marker_windows && !m.distortion) {
+      m.DetectInWindows(*predicted);
+    } else {
+      m.DetectFull();
+      full_detection_done = true;
+    }
+  }
+  Lap(&mark, &tm.detection_ms);
+
+  PoseRefinementResult refined;
+  bool ok = false;
+  if (predicted) {
+    std::optional<PosePrior> prior;
+    if (options_.use_motion_prior) {
+      prior = PosePrior{*predicted, RadFromDeg(options_.motion_prior_sigma_deg), options_.motion_prior_sigma_m};
+    }
+    refined = m.Track(*predicted, options_.search_radius_px, prior, &tm.matching_ms, &tm.refinement_ms, &mark);
+    ok = m.Accept(refined, &out);
+    if (ok) out.status = LocalizationStatus::kTracked;
+  }
+  if (!ok) {
+    // Relocalise: the whole image for markers, the whole map for keypoints.
+    if (options_.use_markers && !full_detection_done) {
+      m.DetectFull();
+      Lap(&mark, &tm.detection_ms);
+    }
+    const std::optional<Rigid3d> hypothesis = m.Relocalise(frame, &tm.pnp_ms, &tm.matching_ms, &mark);
+    if (hypothesis) {
+      refined = m.Track(*hypothesis, options_.search_radius_px, std::nullopt, &tm.matching_ms, &tm.refinement_ms, &mark);
+      ok = m.Accept(refined, &out);
+      if (ok) out.status = LocalizationStatus::kRelocalized;
+    }
+  }
+  if (ok) {
+    out.ok = true;
+    out.room_from_camera = refined.camera_from_room.Inverse();
+    m.prev_camera_from_room = m.last_camera_from_room;
+    m.prev_t = m.last_t;
+    m.have_prev = m.have_last && m.frames_lost == 0;
+    m.last_camera_from_room = refined.camera_from_room;
+    m.last_t = frame.timestamp_s;
+    m.have_last = true;
+    m.frames_lost = 0;
+  } else {
+    out.ok = false;
+    out.status = LocalizationStatus::kLost;
+    out.markers_used = 0;
+    out.keypoints_used = 0;
+    ++m.frames_lost;
+    m.have_prev = false;
+    std::ostringstream why;
+    why << m.markers.size() << " map marker(s) and " << m.keypoints.size()
+        << " keypoints found; too few agree on a pose";
+    out.message = why.str();
+  }
+  out.markers = m.markers;
+  tm.total_ms = ThreadCpuMs() - start;
+  return out;
+}
+
+}  // namespace arpos

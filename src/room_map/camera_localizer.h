@@ -1,0 +1,178 @@
+#pragma once
+/// Per-frame camera localisation against a room map (the scene-tracking half
+/// of tracking mode): room_from_camera for every RGB-D frame.
+///
+/// Per frame:
+///  1. prediction: constant-velocity motion model from the last two poses;
+///  2. markers: in tracking, each map marker the predicted pose puts in view is
+///     searched only in a window around its predicted corners (detection +
+///     edge-fit corners, features/marker_detector.h); when lost, the whole
+///     image is searched. Detections may also be passed in by a caller that
+///     has them already (the tracking stage detects body markers anyway);
+///  3. keypoints: grid-spread ORB with depth (keypoints.h); in tracking each
+///     map landmark the prediction puts in view is matched to keypoints within
+///     a search radius of its predicted pixel (descriptor distance, depth
+///     agreement, ratio test); when lost, all keypoints are matched against the
+///     whole map (brute force, ratio test);
+///  4. relocalisation (no usable prediction): best single-marker pose
+///     (IPPE + depth) or PnP + RANSAC on keypoint matches;
+///  5. refinement: marker corners and keypoints jointly (and keypoint depth),
+///     Gauss-Newton with Huber/Tukey losses and a weak motion prior
+///     (pose_refiner.h); a second matching pass at the refined pose;
+///  6. acceptance: enough inliers (a fully seen marker, or min_keypoints), RMS
+///     within bounds; otherwise the frame is lost: no pose is reported and
+///     nothing is guessed.
+///
+/// Frames: room = origin marker frame (DATASET.md); camera = OpenCV. Metres,
+/// pixels of the frame's image. Thread-safety: one CameraLocalizer per thread.
+
+#include <array>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "features/marker_detector.h"
+#include "features/marker_pose.h"
+#include "geometry/rigid3.h"
+#include "room_map/keypoints.h"
+#include "room_map/pose_refiner.h"
+#include "room_map/room_map.h"
+#include "sensor/case_config.h"
+#include "sensor/intrinsics.h"
+#include "sensor/rgbd_frame.h"
+
+namespace arpos {
+
+struct CameraLocalizerOptions {
+  /// Room-marker detection (dictionary, room id range; see MakeCameraLocalizerOptions).
+  MarkerDetectorOptions detector;
+  MarkerPoseOptions marker_pose;
+  KeypointOptions keypoints;
+  PoseRefinerOptions refiner;
+
+  /// Inverse sRGB curve before marker detection (camera_response.h).
+  bool linearize_srgb = true;
+  bool use_markers = true;
+  bool use_keypoints = true;
+  /// Search markers only around their predicted corners while tracking
+  /// (cameras without lens distortion; otherwise the whole image).
+  bool marker_windows = true;
+  /// Window margin around the predicted marker: max(px, fraction * side).
+  double window_margin_px = 16;
+  double window_margin_fraction = 0.5;
+  /// Markers predicted smaller than this (mean side, px) are not searched.
+  double min_marker_side_px = 12;
+
+  /// Pixel noise (1 sigma) of marker corners (floor; the edge fit's own sigma
+  /// is used when larger) and of keypoints.
+  double marker_corner_sigma_px = 0.15;
+  double keypoint_sigma_px = 1.0;
+  /// Use measured depth at keypoints in the refinement, with
+  /// sigma(z) = depth_sigma_const_m + depth_sigma_quad_per_m * z^2.
+  bool use_keypoint_depth = true;
+  double depth_sigma_const_m = 0.002;
+  double depth_sigma_quad_per_m = 0.003;
+
+  /// Tracking search: radius around the predicted pixel, descriptor distance,
+  /// and the best/second-best ratio for a match.
+  double search_radius_px = 15;
+  double refined_search_radius_px = 4;
+  int max_hamming = 64;
+  double match_ratio = 0.9;
+  /// Relocalisation: brute-force matching against the whole map.
+  int relocalisation_max_hamming = 50;
+  double relocalisation_ratio = 0.8;
+  int ransac_iterations = 200;
+  double ransac_threshold_px = 4.0;
+
+  /// Weak prior on the pose from the motion model (only while tracking).
+  bool use_motion_prior = true;
+  double motion_prior_sigma_m = 0.05;
+  double motion_prior_sigma_deg = 5.0;
+  /// Tracking continues from the last pose for this many lost frames, then
+  /// the next frame is relocalised from scratch.
+  int max_frames_lost_before_relocalising = 3;
+
+  /// Acceptance: a frame is localised with at least this many inlier marker
+  /// corners, or at least min_keypoints keypoint inliers ...
+  int min_marker_corners = 4;
+  int min_keypoints = 15;
+  /// ... and inlier RMS reprojection errors within these.
+  double max_marker_rms_px = 1.5;
+  double max_keypoint_rms_px = 2.5;
+
+  std::string Validate() const;
+  bool Check(std::string* reason = nullptr) const;
+};
+
+/// Options for a case: dictionary and room id range from case.yaml.
+CameraLocalizerOptions MakeCameraLocalizerOptions(const CaseConfig& config);
+
+enum class LocalizationStatus {
+  kTracked = 0,      ///< from the motion-predicted pose
+  kRelocalized = 1,  ///< found without a prediction (first frame, after loss)
+  kLost = 2,         ///< no pose: too few markers/keypoints agree
+};
+const char* LocalizationStatusName(LocalizationStatus status);
+
+/// Time per step, milliseconds of this thread's CPU time.
+struct LocalizationTimings {
+  double detection_ms = 0;   ///< marker detection and corner refinement
+  double keypoints_ms = 0;   ///< grey conversion, keypoint extraction and depth
+  double matching_ms = 0;    ///< landmark search (tracking) or brute force (relocalisation)
+  double pnp_ms = 0;         ///< relocalisation hypotheses (IPPE / PnP RANSAC)
+  double refinement_ms = 0;  ///< joint non-linear refinement(s)
+  double total_ms = 0;
+};
+
+struct LocalizationResult {
+  bool ok = false;
+  Rigid3d room_from_camera;  ///< meaningful only when ok
+  LocalizationStatus status = LocalizationStatus::kLost;
+  int markers_used = 0;      ///< markers with all 4 corners inliers
+  int keypoints_used = 0;    ///< keypoint inliers
+  double rms_px = 0;         ///< RMS reprojection error over all inliers
+  double marker_rms_px = 0;
+  double keypoint_rms_px = 0;
+  std::string message;       ///< why, when lost
+  LocalizationTimings timings;
+  /// The room markers found in this frame (image pixels), for callers that
+  /// need them (overlay, audit).
+  std::vector<MarkerObservation> markers;
+};
+
+class CameraLocalizer {
+ public:
+  /// `intrinsics` of the frames to come. Throws arpos::Error for invalid
+  /// options or intrinsics, InputError for an unusable map.
+  CameraLocalizer(RoomMap map, const CameraIntrinsics& intrinsics,
+                  const CameraLocalizerOptions& options);
+  ~CameraLocalizer();
+  CameraLocalizer(const CameraLocalizer&) = delete;
+  CameraLocalizer& operator=(const CameraLocalizer&) = delete;
+
+  /// Localises one frame (colour CV_8UC3 BGR or CV_8UC1, depth CV_16UC1 or
+  /// empty). Throws arpos::Error for frames of the wrong type or size.
+  LocalizationResult Localize(const RgbdFrame& frame);
+  /// Same, with room-marker detections made by the caller on this frame
+  /// (image pixels, any ids: those not in the map are ignored). Skips the
+  /// localiser's own marker detection.
+  LocalizationResult Localize(const RgbdFrame& frame,
+                              const std::vector<MarkerObservation>& detections);
+
+  /// Forgets the motion model: the next frame is relocalised.
+  void Reset();
+
+  const RoomMap& map() const { return map_; }
+  const CameraLocalizerOptions& options() const { return options_; }
+
+ private:
+  LocalizationResult Run(const RgbdFrame& frame, const std::vector<MarkerObservation>* detections);
+  struct Impl;
+  RoomMap map_;
+  CameraLocalizerOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace arpos

@@ -1,0 +1,127 @@
+#pragma once
+/// Image keypoints for the room map and for localisation: FAST corners spread
+/// over an image grid, oriented BRIEF (ORB) descriptors, depth at each corner.
+///
+/// One pyramid level only: localisation must run at video rate on one core
+/// (cv::ORB with 8 levels costs ~10x more), and the room map is built and used
+/// at similar distances (0.6-3 m). Descriptors are OpenCV's ORB (32 bytes,
+/// patch 31) so they can be matched with cv::NORM_HAMMING anywhere.
+///
+/// Pixel convention: OpenCV (centre of the top-left pixel at (0, 0)); FAST
+/// corners are at integer pixels.
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
+
+namespace arpos {
+
+struct KeypointOptions {
+  int max_keypoints = 1000;
+  /// The image is cut into cells of about this size; each cell keeps its
+  /// strongest corners first, so keypoints spread over the whole image.
+  int grid_cell_px = 40;
+  int fast_threshold = 20;
+  /// Cells with no corner at fast_threshold are searched again at this one.
+  int min_fast_threshold = 8;
+  /// Keypoints closer than this to the border get no descriptor (ORB needs 19).
+  int border_px = 20;
+  /// Depth at a keypoint is valid only if its 3x3 neighbourhood is complete and
+  /// spans less than this fraction of the depth (rejects depth edges).
+  double max_depth_relative_span = 0.03;
+  double min_depth_m = 0.2;
+  double max_depth_m = 8.0;
+
+  std::string Validate() const;
+  bool Check(std::string* reason = nullptr) const;
+};
+
+/// Keypoints of one image. `keypoints[i]`, descriptor row i and `depth_m[i]`
+/// belong together; depth 0 = no valid reading.
+struct KeypointSet {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;  ///< CV_8UC1, N x 32
+  std::vector<float> depth_m;
+  int image_width = 0, image_height = 0;
+
+  size_t size() const { return keypoints.size(); }
+  void clear();
+};
+
+/// Indices of keypoints by grid cell, for searches around a predicted pixel.
+class KeypointGrid {
+ public:
+  void Build(const KeypointSet& set, int cell_px = 16);
+  /// Calls f(i) for every keypoint within `radius_px` of (u, v).
+  template <typename F>
+  void ForEachInRadius(double u, double v, double radius_px, F&& f) const;
+
+ private:
+  const KeypointSet* set_ = nullptr;
+  int cell_px_ = 16, cols_ = 0, rows_ = 0;
+  std::vector<int> cell_start_;  ///< CSR: cell c holds order_[cell_start_[c] .. cell_start_[c+1])
+  std::vector<int> order_;
+};
+
+/// Extracts keypoints frame after frame, reusing buffers. Not thread-safe.
+class KeypointExtractor {
+ public:
+  explicit KeypointExtractor(const KeypointOptions& options = {});
+  /// `gray` CV_8UC1; `depth` CV_16UC1 registered to it (`depth_scale` units
+  /// per metre) or empty. Throws arpos::Error for wrong types or sizes.
+  void Extract(const cv::Mat& gray, const cv::Mat& depth, double depth_scale, KeypointSet* out);
+  const KeypointOptions& options() const { return options_; }
+
+ private:
+  KeypointOptions options_;
+  cv::Ptr<cv::ORB> orb_;
+  std::vector<cv::KeyPoint> candidates_;
+  std::vector<std::vector<int>> cells_;
+  std::vector<int> umax_;
+};
+
+/// Hamming distance of two 32-byte descriptors.
+inline int HammingDistance32(const std::uint8_t* a, const std::uint8_t* b) {
+  int d = 0;
+  for (int k = 0; k < 4; ++k) {
+    std::uint64_t x, y;
+    __builtin_memcpy(&x, a + 8 * k, 8);
+    __builtin_memcpy(&y, b + 8 * k, 8);
+    d += __builtin_popcountll(x ^ y);
+  }
+  return d;
+}
+
+/// Depth (m) at integer pixel (u, v) if its 3x3 neighbourhood is valid and
+/// smooth (see KeypointOptions), else 0.
+float SmoothDepthAt(const cv::Mat& depth, int u, int v, double depth_scale,
+                    const KeypointOptions& options);
+
+// ---------------------------------------------------------------- inline
+
+template <typename F>
+void KeypointGrid::ForEachInRadius(double u, double v, double radius_px, F&& f) const {
+  if (set_ == nullptr || cols_ == 0) return;
+  const int c0 = std::max(0, static_cast<int>((u - radius_px) / cell_px_));
+  const int c1 = std::min(cols_ - 1, static_cast<int>((u + radius_px) / cell_px_));
+  const int r0 = std::max(0, static_cast<int>((v - radius_px) / cell_px_));
+  const int r1 = std::min(rows_ - 1, static_cast<int>((v + radius_px) / cell_px_));
+  const double r2 = radius_px * radius_px;
+  for (int r = r0; r <= r1; ++r) {
+    for (int c = c0; c <= c1; ++c) {
+      const int cell = r * cols_ + c;
+      for (int k = cell_start_[cell]; k < cell_start_[cell + 1]; ++k) {
+        const int i = order_[k];
+        const double du = set_->keypoints[i].pt.x - u, dv = set_->keypoints[i].pt.y - v;
+        if (du * du + dv * dv <= r2) f(i);
+      }
+    }
+  }
+}
+
+}  // namespace arpos

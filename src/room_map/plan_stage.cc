@@ -1,0 +1,227 @@
+#include "room_map/plan_stage.h"
+
+#include <sstream>
+
+#include "geometry/mesh_io.h"
+#include "sensor/sequence.h"
+#include "util/check.h"
+#include "util/logging.h"
+#include "util/string_util.h"
+
+namespace arpos {
+namespace {
+
+RecordingIntrinsics ToRecordingIntrinsics(const CameraIntrinsics& c) {
+  RecordingIntrinsics r;
+  r.width = c.width;
+  r.height = c.height;
+  r.fx = c.fx;
+  r.fy = c.fy;
+  r.cx = c.cx;
+  r.cy = c.cy;
+  r.distortion = c.distortion;
+  r.depth_scale = c.depth_scale;
+  return r;
+}
+
+}  // namespace
+
+std::string RoomMapStageOptions::Check() const {
+  if (frame_step < 1) return "frame step must be at least 1";
+  if (max_frames < 0) return "max frames must not be negative";
+  if (threads < 1) return "threads must be at least 1";
+  if (max_landmarks < 0) return "max landmarks must not be negative";
+  if (actor.empty()) return "actor must not be empty";
+  return "";
+}
+
+std::string PlanRoomMapOptions::Check() const {
+  if (case_dir.empty()) return "no case folder given";
+  if (plan_id && !plan_id->valid()) return "plan id must be positive";
+  return stage.Check();
+}
+
+std::string CasePatientId(const std::filesystem::path& case_root) {
+  return std::filesystem::absolute(case_root).lexically_normal().filename().string();
+}
+
+std::optional<std::filesystem::path> FindCaseRoot(const std::filesystem::path& sequence_dir) {
+  std::filesystem::path p = std::filesystem::absolute(sequence_dir).lexically_normal();
+  if (p.has_filename() == false) p = p.parent_path();
+  while (!p.empty()) {
+    if (std::filesystem::exists(p / "case.yaml")) return p;
+    if (p == p.root_path() || p.parent_path() == p) break;
+    p = p.parent_path();
+  }
+  return std::nullopt;
+}
+
+RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseFolder& folder, const RoomMapStageOptions& options) {
+  RoomMapBuildOptions build = MakeRoomMapBuildOptions(folder.config);
+  build.frame_step = options.frame_step;
+  build.max_frames = options.max_frames;
+  build.threads = options.threads;
+  build.use_keypoints = options.use_keypoints;
+  build.max_landmarks = options.max_landmarks;
+  if (options.exclude_couch) build.exclude_landmarks.push_back(CouchExclusionBox(folder.room_from_model_target));
+  return build;
+}
+
+StoredRoomMap BuildAndStoreRoomMap(Database* database, PlanId plan,
+                                   std::optional<RecordingId> room_recording, const CaseFolder& folder,
+                                   const RoomMapStageOptions& options, const ControllerCallbacks& callbacks) {
+  ARPOS_CHECK(database != nullptr, "the room map stage needs a session store");
+  const std::string problem = options.Check();
+  if (!problem.empty()) ARPOS_INPUT_ERROR("room map: " << problem);
+  if (!database->GetPlan(plan)) ARPOS_INPUT_ERROR("the store has no plan " << plan.value());
+  if (!std::filesystem::is_directory(folder.room_dir)) {
+    ARPOS_INPUT_ERROR(folder.room_dir.string() << ": no room sequence (the room map is built from room/)");
+  }
+  const Sequence room = Sequence::Open(folder.room_dir);
+  StoredRoomMap stored;
+  stored.build = BuildRoomMap(room, folder.config, MakeRoomMapBuildOptions(folder, options), callbacks);
+  const RoomMapRecord record = ToRecord(stored.build.map, plan, room_recording);
+  database->WithTransaction([&] {
+    stored.room_map_id = database->AddRoomMap(record);
+    const RoomMapBuildReport& r = stored.build.report;
+    database->AppendAudit(
+        {AuditId(), 0, options.actor, "build_room_map", "room_map:" + std::to_string(stored.room_map_id.value()),
+         StringPrintf("plan %lld, %zu markers (origin %d), %d landmarks, marker residual mean %.3f px max %.3f px, "
+                      "%d/%d frames, depth scale %.4f, from %s",
+                      static_cast<long long>(plan.value()), stored.build.map.markers.size(),
+                      stored.build.map.origin_marker_id, stored.build.map.num_landmarks(),
+                      stored.build.map.mean_residual_px, stored.build.map.max_residual_px, r.frames_used,
+                      r.frames_total, r.depth_scale_ratio, folder.room_dir.string().c_str())});
+  });
+  return stored;
+}
+
+std::string PlanRoomMapResult::Summary() const {
+  std::ostringstream out;
+  out << "room map " << room_map_id.value() << " stored for plan " << plan_id.value()
+      << (created_plan ? " (created)" : "") << ", patient " << patient_id.value() << ", recording "
+      << recording_id.value() << "\n";
+  out << "markers: " << build.map.markers.size() << " (origin " << build.map.origin_marker_id
+      << "), residual mean " << StringPrintf("%.3f", build.map.mean_residual_px) << " px, max "
+      << StringPrintf("%.3f", build.map.max_residual_px) << " px\n";
+  for (const auto& m : build.map.markers) {
+    const Eigen::Vector3d& t = m.room_from_marker.translation;
+    out << StringPrintf("  marker %3d  at [%8.4f %8.4f %8.4f] m  residual %.3f px  %d views\n", m.id, t.x(), t.y(),
+                        t.z(), m.residual_px, m.num_observations);
+  }
+  out << build.report.ToText();
+  return out.str();
+}
+
+PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* database,
+                                 const ControllerCallbacks& callbacks) {
+  ARPOS_CHECK(database != nullptr, "plan needs a session store");
+  const std::string problem = options.Check();
+  if (!problem.empty()) ARPOS_INPUT_ERROR("plan: " << problem);
+  if (callbacks.progress) callbacks.progress("reading the case", 0.0);
+  const CaseFolder folder = LoadCaseFolder(options.case_dir);
+  const std::string patient_name =
+      options.patient_external_id.empty() ? CasePatientId(folder.root) : options.patient_external_id;
+  PlanRoomMapResult result;
+
+  if (options.plan_id) {
+    const std::optional<PlanRecord> plan = database->GetPlan(*options.plan_id);
+    if (!plan) ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
+    result.plan_id = plan->id;
+    result.patient_id = plan->patient_id;
+  } else {
+    const std::optional<PatientRecord> patient = database->FindPatient(patient_name);
+    if (patient) {
+      result.patient_id = patient->id;
+      const std::vector<PlanSummary> plans = database->ListPlans(patient->id, 1);
+      if (!plans.empty()) result.plan_id = plans.front().id;
+    }
+  }
+  // Patient, plan and room recording commit together.
+  database->WithTransaction([&] {
+    if (!result.patient_id.valid()) {
+      PatientRecord record;
+      record.external_id = patient_name;
+      record.display_name = patient_name;
+      result.patient_id = database->AddPatient(record);
+      database->AppendAudit({AuditId(), 0, options.stage.actor, "add_patient",
+                             "patient:" + std::to_string(result.patient_id.value()),
+                             "from case " + folder.root.string()});
+    }
+    if (!result.plan_id.valid()) {
+      const TriangleMesh model = LoadTriangleMesh(folder.reference_model);
+      PlanRecord plan;
+      plan.patient_id = result.patient_id;
+      plan.name = patient_name + " plan";
+      plan.reference_model_name = folder.reference_model.filename().string();
+      plan.reference_model.vertices = model.vertices;
+      for (const auto& f : model.faces) {
+        plan.reference_model.faces.push_back({static_cast<std::uint32_t>(f[0]), static_cast<std::uint32_t>(f[1]),
+                                              static_cast<std::uint32_t>(f[2])});
+      }
+      plan.room_from_model_target = folder.room_from_model_target;
+      result.plan_id = database->AddPlan(plan);
+      result.created_plan = true;
+      database->AppendAudit({AuditId(), 0, options.stage.actor, "add_plan",
+                             "plan:" + std::to_string(result.plan_id.value()),
+                             "reference model " + plan.reference_model_name + ", target pose " +
+                                 plan.room_from_model_target.ToString()});
+    }
+    RecordingRecord rec;
+    rec.kind = RecordingKind::kRoom;
+    rec.plan_id = result.plan_id;
+    rec.name = "room";
+    rec.path = std::filesystem::absolute(folder.room_dir).lexically_normal().string();
+    rec.frame_count = std::filesystem::is_directory(folder.room_dir)
+                          ? static_cast<std::int64_t>(Sequence::Open(folder.room_dir).size())
+                          : 0;
+    rec.intrinsics = ToRecordingIntrinsics(folder.config.camera);
+    result.recording_id = database->AddRecording(rec);
+  });
+  StoredRoomMap stored =
+      BuildAndStoreRoomMap(database, result.plan_id, result.recording_id, folder, options.stage, callbacks);
+  result.room_map_id = stored.room_map_id;
+  result.build = std::move(stored.build);
+  return result;
+}
+
+RoomMap LoadRoomMapForLocalization(Database* database, std::optional<PlanId> plan,
+                                   const std::string& patient_external_id, PlanId* plan_out,
+                                   RoomMapId* map_id_out) {
+  ARPOS_CHECK(database != nullptr, "localisation needs a session store");
+  std::optional<RoomMapId> map_id;
+  PlanId chosen;
+  if (plan) {
+    if (!database->GetPlan(*plan)) ARPOS_INPUT_ERROR("the store has no plan " << plan->value());
+    map_id = database->LatestRoomMap(*plan);
+    if (!map_id) {
+      ARPOS_INPUT_ERROR("plan " << plan->value() << " has no room map: run `arpos plan CASE --plan "
+                                << plan->value() << "` first");
+    }
+    chosen = *plan;
+  } else {
+    std::vector<PlanSummary> plans;
+    if (!patient_external_id.empty()) {
+      if (const auto patient = database->FindPatient(patient_external_id)) plans = database->ListPlans(patient->id);
+    }
+    if (plans.empty()) plans = database->ListPlans();
+    for (const auto& p : plans) {
+      map_id = database->LatestRoomMap(p.id);
+      if (map_id) {
+        chosen = p.id;
+        break;
+      }
+    }
+    if (!map_id) {
+      ARPOS_INPUT_ERROR("the store has no room map" << (plans.empty() ? " (and no plan)" : "")
+                                                    << ": run `arpos plan CASE` first");
+    }
+  }
+  const std::optional<RoomMapRecord> record = database->GetRoomMap(*map_id);
+  if (!record) ARPOS_INPUT_ERROR("room map " << map_id->value() << " could not be read");
+  if (plan_out) *plan_out = chosen;
+  if (map_id_out) *map_id_out = *map_id;
+  return FromRecord(*record);
+}
+
+}  // namespace arpos

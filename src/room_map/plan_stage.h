@@ -1,0 +1,97 @@
+#pragma once
+/// The planning stage with the session store: build the room map of a case
+/// and store it as a RoomMapRecord of a plan; load the map back for
+/// localisation. Used by `arpos plan`, `arpos localize` and (through
+/// BuildAndStoreRoomMap) the run-case controller.
+///
+/// Patients and plans follow the run-case controller's convention: the
+/// patient's external id is the case folder's name unless given; a plan
+/// created here is named "<case> plan" and holds the case's reference model
+/// and target pose.
+
+#include <filesystem>
+#include <optional>
+#include <string>
+
+#include "controllers/controller.h"
+#include "room_map/room_map.h"
+#include "room_map/room_map_builder.h"
+#include "sensor/case_folder.h"
+#include "store/database.h"
+
+namespace arpos {
+
+/// What a caller may tune about the map (the rest comes from the case).
+struct RoomMapStageOptions {
+  int frame_step = 1;       ///< use every n-th room frame
+  int max_frames = 0;       ///< 0 = all
+  int threads = 2;
+  bool use_keypoints = true;
+  int max_landmarks = 4000;
+  /// Leave out landmarks around the isocentre at the target pose (couch top
+  /// and patient move during positioning; see CouchExclusionBox).
+  bool exclude_couch = true;
+  std::string actor = "arpos plan";  ///< for the audit log
+
+  std::string Check() const;  ///< empty if valid
+};
+
+/// The builder's options for `folder` with the stage options applied.
+RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseFolder& folder, const RoomMapStageOptions& options);
+
+struct StoredRoomMap {
+  RoomMapId room_map_id;
+  RoomMapBuildResult build;
+};
+
+/// Builds the map from `folder.room_dir` and stores it under `plan`
+/// (`room_recording`: the stored room recording it was built from, if any),
+/// with an audit entry. The map is stored in one transaction after it is
+/// built. Throws InputError (unreadable frame, origin marker never seen, no
+/// such plan), Cancelled.
+StoredRoomMap BuildAndStoreRoomMap(Database* database, PlanId plan,
+                                   std::optional<RecordingId> room_recording, const CaseFolder& folder,
+                                   const RoomMapStageOptions& options,
+                                   const ControllerCallbacks& callbacks = {});
+
+/// `arpos plan CASE`: the case's patient and plan (created if the store has
+/// none for the case, or the given plan), the room recording, the map.
+struct PlanRoomMapOptions {
+  std::filesystem::path case_dir;
+  std::optional<PlanId> plan_id;    ///< else the newest plan of the case's patient, created if none
+  std::string patient_external_id;  ///< empty: the case folder's name
+  RoomMapStageOptions stage;
+
+  std::string Check() const;
+};
+
+struct PlanRoomMapResult {
+  PatientId patient_id;
+  PlanId plan_id;
+  bool created_plan = false;
+  RecordingId recording_id;
+  RoomMapId room_map_id;
+  RoomMapBuildResult build;
+  std::string Summary() const;
+};
+
+PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* database,
+                                 const ControllerCallbacks& callbacks = {});
+
+/// The room map to localise against: the newest map of `plan` if given, else
+/// of the newest plan (with a map) of the patient `patient_external_id`, else
+/// of the newest plan in the store that has one. Throws InputError saying what
+/// is missing ("plan 3 has no room map: run `arpos plan CASE` first") when
+/// there is none. `plan_out`/`map_id_out` receive what was chosen.
+RoomMap LoadRoomMapForLocalization(Database* database, std::optional<PlanId> plan,
+                                   const std::string& patient_external_id,
+                                   PlanId* plan_out = nullptr, RoomMapId* map_id_out = nullptr);
+
+/// The case folder holding a sequence folder: the nearest ancestor of
+/// `sequence_dir` (itself included) with a case.yaml; nullopt if none.
+std::optional<std::filesystem::path> FindCaseRoot(const std::filesystem::path& sequence_dir);
+
+/// The patient external id run-case and plan use for a case folder: its name.
+std::string CasePatientId(const std::filesystem::path& case_root);
+
+}  // namespace arpos

@@ -1,0 +1,198 @@
+#include "room_map/pose_refiner.h"
+
+#include <cmath>
+#include <sstream>
+
+#include <Eigen/Cholesky>
+
+#include "geometry/so3.h"
+
+namespace arpos {
+
+void PoseCorrespondences::clear() {
+  points_in_room.clear();
+  pixels.clear();
+  inv_sigma_px.clear();
+  depth_m.clear();
+  inv_sigma_depth.clear();
+  group.clear();
+  tag.clear();
+}
+
+void PoseCorrespondences::reserve(size_t n) {
+  points_in_room.reserve(n);
+  pixels.reserve(n);
+  inv_sigma_px.reserve(n);
+  depth_m.reserve(n);
+  inv_sigma_depth.reserve(n);
+  group.reserve(n);
+  tag.reserve(n);
+}
+
+void PoseCorrespondences::Add(const Eigen::Vector3d& point_in_room, const Eigen::Vector2d& pixel,
+                              double sigma_px, CorrespondenceGroup g, int t, double depth,
+                              double sigma_depth_m) {
+  points_in_room.push_back(point_in_room);
+  pixels.push_back(pixel);
+  inv_sigma_px.push_back(static_cast<float>(1.0 / sigma_px));
+  const bool has_depth = depth > 0 && sigma_depth_m > 0;
+  depth_m.push_back(has_depth ? static_cast<float>(depth) : 0.f);
+  inv_sigma_depth.push_back(has_depth ? static_cast<float>(1.0 / sigma_depth_m) : 0.f);
+  group.push_back(g);
+  tag.push_back(t);
+}
+
+std::string PoseRefinerOptions::Validate() const {
+  std::ostringstream out;
+  if (max_iterations < 1) out << "max_iterations must be at least 1";
+  else if (huber_iterations < 0) out << "huber_iterations must not be negative";
+  else if (!(marker_huber > 0) || !(keypoint_tukey > 0) || !(inlier_threshold > 0))
+    out << "robust thresholds must be positive";
+  return out.str();
+}
+
+bool PoseRefinerOptions::Check(std::string* reason) const {
+  const std::string r = Validate();
+  if (reason) *reason = r;
+  return r.empty();
+}
+
+namespace {
+
+inline double HuberWeight(double r, double k) { return r <= k ? 1.0 : k / r; }
+inline double TukeyWeight(double r, double c) {
+  if (r >= c) return 0.0;
+  const double x = r / c;
+  const double w = 1 - x * x;
+  return w * w;
+}
+
+}  // namespace
+
+PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
+                                      const CameraIntrinsics& intrinsics,
+                                      const Rigid3d& camera_from_room_initial,
+                                      const PoseRefinerOptions& options,
+                                      const std::optional<PosePrior>& prior) {
+  PoseRefinementResult result;
+  result.camera_from_room = camera_from_room_initial;
+  const size_t n = corr.size();
+  result.inlier.assign(n, 0);
+  if (n < 3 && !prior) return result;
+
+  const double fx = intrinsics.fx, fy = intrinsics.fy, cx = intrinsics.cx, cy = intrinsics.cy;
+  Eigen::Matrix3d R = camera_from_room_initial.RotationMatrix();
+  Eigen::Vector3d t = camera_from_room_initial.translation;
+  Eigen::Matrix3d prior_R_inv = Eigen::Matrix3d::Identity();
+  if (prior) prior_R_inv = prior->camera_from_room.RotationMatrix().transpose();
+
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  Mat6 H;
+  Vec6 g;
+  for (int it = 0; it < options.max_iterations; ++it) {
+    H.setZero();
+    g.setZero();
+    const bool tukey = it >= options.huber_iterations;
+    int used = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d p = R * corr.points_in_room[i] + t;
+      if (p.z() <= 1e-6) continue;
+      const double iz = 1.0 / p.z();
+      const double u = fx * p.x() * iz + cx, v = fy * p.y() * iz + cy;
+      const double s = corr.inv_sigma_px[i];
+      const double ru = (u - corr.pixels[i].x()) * s, rv = (v - corr.pixels[i].y()) * s;
+      const double r = std::sqrt(ru * ru + rv * rv);
+      double w;
+      if (corr.group[i] == CorrespondenceGroup::kMarker) {
+        w = HuberWeight(r, options.marker_huber);
+      } else {
+        w = tukey ? TukeyWeight(r, options.keypoint_tukey) : HuberWeight(r, options.marker_huber);
+      }
+      if (w <= 0) continue;
+      ++used;
+      // d(u,v)/dp and dp/d(omega, t) = [-[p]x, I].
+      Eigen::Matrix<double, 2, 3> Jp;
+      Jp << fx * iz, 0, -fx * p.x() * iz * iz, 0, fy * iz, -fy * p.y() * iz * iz;
+      Eigen::Matrix<double, 2, 6> J;
+      J.leftCols<3>() = -Jp * Skew(p);
+      J.rightCols<3>() = Jp;
+      J *= s;
+      H.noalias() += w * J.transpose() * J;
+      g.noalias() += w * J.transpose() * Eigen::Vector2d(ru, rv);
+      if (corr.inv_sigma_depth[i] > 0) {
+        const double sd = corr.inv_sigma_depth[i];
+        const double rd = (p.z() - corr.depth_m[i]) * sd;
+        const double wd = tukey ? TukeyWeight(std::abs(rd), options.keypoint_tukey)
+                                : HuberWeight(std::abs(rd), options.marker_huber);
+        if (wd > 0) {
+          Vec6 Jd;
+          Jd << p.y(), -p.x(), 0, 0, 0, 1;
+          Jd *= sd;
+          H.noalias() += wd * Jd * Jd.transpose();
+          g.noalias() += wd * Jd * rd;
+        }
+      }
+    }
+    if (prior) {
+      const Eigen::Matrix3d dR = R * prior_R_inv;
+      const Eigen::Vector3d e_rot = RotationVectorFromQuaternion(Eigen::Quaterniond(dR));
+      const Eigen::Vector3d e_t = t - dR * prior->camera_from_room.translation;
+      const double wr = 1.0 / (prior->sigma_rad * prior->sigma_rad);
+      const double wt = 1.0 / (prior->sigma_m * prior->sigma_m);
+      H.topLeftCorner<3, 3>().diagonal().array() += wr;
+      H.bottomRightCorner<3, 3>().diagonal().array() += wt;
+      g.head<3>() += wr * e_rot;
+      g.tail<3>() += wt * e_t;
+    } else if (used < 3) {
+      return result;
+    }
+    const Eigen::LDLT<Mat6> ldlt(H);
+    if (ldlt.info() != Eigen::Success) break;
+    const Vec6 delta = -ldlt.solve(g);
+    if (!delta.allFinite()) break;
+    const Eigen::Matrix3d dR = QuaternionFromRotationVector(delta.head<3>()).toRotationMatrix();
+    R = dR * R;
+    t = dR * t + delta.tail<3>();
+    result.iterations = it + 1;
+    if (delta.head<3>().norm() < options.min_step_rad && delta.tail<3>().norm() < options.min_step_m &&
+        it + 1 >= options.huber_iterations) {
+      result.converged = true;
+      break;
+    }
+  }
+  if (result.iterations == options.max_iterations) result.converged = true;  // ran its course
+  result.camera_from_room = Rigid3d(ProjectToSO3(R), t);
+  result.information = H;
+
+  // Inliers and residual statistics at the solution.
+  double sum_m = 0, sum_k = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d p = R * corr.points_in_room[i] + t;
+    if (p.z() <= 1e-6) continue;
+    const double u = fx * p.x() / p.z() + cx, v = fy * p.y() / p.z() + cy;
+    const double du = u - corr.pixels[i].x(), dv = v - corr.pixels[i].y();
+    const double e2 = du * du + dv * dv;
+    const double r = std::sqrt(e2) * corr.inv_sigma_px[i];
+    bool ok = r < options.inlier_threshold;
+    if (ok && corr.inv_sigma_depth[i] > 0) {
+      ok = std::abs(p.z() - corr.depth_m[i]) * corr.inv_sigma_depth[i] < options.inlier_threshold;
+    }
+    if (!ok) continue;
+    result.inlier[i] = 1;
+    ++result.num_inliers;
+    if (corr.group[i] == CorrespondenceGroup::kMarker) {
+      ++result.marker_inliers;
+      sum_m += e2;
+    } else {
+      ++result.keypoint_inliers;
+      sum_k += e2;
+    }
+  }
+  if (result.marker_inliers) result.marker_rms_px = std::sqrt(sum_m / result.marker_inliers);
+  if (result.keypoint_inliers) result.keypoint_rms_px = std::sqrt(sum_k / result.keypoint_inliers);
+  if (result.num_inliers) result.rms_px = std::sqrt((sum_m + sum_k) / result.num_inliers);
+  return result;
+}
+
+}  // namespace arpos

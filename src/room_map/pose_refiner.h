@@ -1,0 +1,96 @@
+#pragma once
+/// Non-linear refinement of one camera pose from 2D-3D correspondences
+/// (marker corners and keypoints jointly), optional depth measurements and an
+/// optional pose prior, with robust losses. Gauss-Newton on SE(3) with a left
+/// perturbation camera_from_room <- exp(delta) * camera_from_room; 6x6 normal
+/// equations, no allocation per iteration once warmed up: fast enough for
+/// every frame (~50 us for 500 correspondences).
+///
+/// Frames and units: points in the room frame (m); pixels undistorted (ideal)
+/// pixels of `intrinsics` (OpenCV convention); depth = z in the camera frame (m).
+///
+/// Robust losses (on whitened residuals, i.e. residual / sigma):
+/// - group kMarker: Huber with threshold `marker_huber`;
+/// - group kKeypoint: Huber for the first `huber_iterations`, then Tukey's
+///   biweight with cut-off `keypoint_tukey` (outliers get zero weight).
+/// A correspondence is an inlier if its whitened reprojection residual is
+/// below `inlier_threshold` (and its depth residual, if any, below it too).
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "geometry/rigid3.h"
+#include "sensor/intrinsics.h"
+
+namespace arpos {
+
+enum class CorrespondenceGroup : std::uint8_t { kMarker = 0, kKeypoint = 1 };
+
+/// Correspondences as parallel arrays (structure of arrays for speed).
+struct PoseCorrespondences {
+  std::vector<Eigen::Vector3d> points_in_room;
+  std::vector<Eigen::Vector2d> pixels;
+  std::vector<float> inv_sigma_px;       ///< 1 / sigma of the pixel (per axis)
+  std::vector<float> depth_m;            ///< measured z, 0 = none
+  std::vector<float> inv_sigma_depth;    ///< 1 / sigma(z) of that measurement (1/m)
+  std::vector<CorrespondenceGroup> group;
+  std::vector<int> tag;                  ///< caller's id (landmark index, marker id * 4 + corner)
+
+  size_t size() const { return pixels.size(); }
+  void clear();
+  void reserve(size_t n);
+  void Add(const Eigen::Vector3d& point_in_room, const Eigen::Vector2d& pixel, double sigma_px,
+           CorrespondenceGroup group, int tag, double depth_m = 0, double sigma_depth_m = 0);
+};
+
+struct PoseRefinerOptions {
+  int max_iterations = 12;
+  int huber_iterations = 3;
+  double marker_huber = 3.0;
+  double keypoint_tukey = 4.0;
+  double inlier_threshold = 3.0;
+  /// Stop when the update is below these.
+  double min_step_rad = 1e-8;
+  double min_step_m = 1e-8;
+
+  std::string Validate() const;
+  bool Check(std::string* reason = nullptr) const;
+};
+
+/// A Gaussian prior on the pose (e.g. from a motion model): sigmas of the
+/// rotation (rad) and translation (m) of camera_from_room about the prior.
+struct PosePrior {
+  Rigid3d camera_from_room;
+  double sigma_rad = 0.05;
+  double sigma_m = 0.05;
+};
+
+struct PoseRefinementResult {
+  Rigid3d camera_from_room;
+  bool converged = false;
+  int iterations = 0;
+  int num_inliers = 0;
+  int marker_inliers = 0;    ///< marker corners among the inliers
+  int keypoint_inliers = 0;  ///< keypoints among the inliers
+  double marker_rms_px = 0;    ///< RMS over inlier marker corners (0 if none)
+  double keypoint_rms_px = 0;  ///< RMS over inlier keypoints (0 if none)
+  double rms_px = 0;           ///< RMS over all inliers
+  std::vector<std::uint8_t> inlier;  ///< per correspondence
+  /// Approximate 6x6 information (J^T W J) of [rotation; translation] at the
+  /// solution, for quality checks (e.g. degenerate geometry).
+  Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+};
+
+/// Refines `camera_from_room_initial`. Never throws for bad geometry: with
+/// fewer than 3 usable correspondences (and no prior) it returns the initial
+/// pose with converged = false.
+PoseRefinementResult RefineCameraPose(const PoseCorrespondences& correspondences,
+                                      const CameraIntrinsics& intrinsics,
+                                      const Rigid3d& camera_from_room_initial,
+                                      const PoseRefinerOptions& options = {},
+                                      const std::optional<PosePrior>& prior = std::nullopt);
+
+}  // namespace arpos

@@ -1,0 +1,137 @@
+#include "room_map/room_map.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "features/marker_pose.h"
+#include "geometry/umeyama.h"
+#include "util/check.h"
+
+namespace arpos {
+
+const RoomMapMarkerEntry* RoomMap::FindMarker(int id) const {
+  auto it = std::lower_bound(markers.begin(), markers.end(), id,
+                             [](const RoomMapMarkerEntry& m, int v) { return m.id < v; });
+  return it != markers.end() && it->id == id ? &*it : nullptr;
+}
+
+std::string RoomMap::Validate() const {
+  std::ostringstream out;
+  if (!(marker_size_m > 0)) {
+    out << "marker size must be positive, got " << marker_size_m;
+    return out.str();
+  }
+  if (markers.empty()) return "the map has no markers";
+  for (size_t i = 0; i < markers.size(); ++i) {
+    if (i > 0 && markers[i].id <= markers[i - 1].id) return "marker ids must be unique and sorted";
+    if (!markers[i].room_from_marker.translation.allFinite()) {
+      out << "marker " << markers[i].id << " has a non-finite pose";
+      return out.str();
+    }
+  }
+  if (FindMarker(origin_marker_id) == nullptr) {
+    out << "the origin marker " << origin_marker_id << " is not in the map";
+    return out.str();
+  }
+  if (!landmarks_in_room.empty() || !landmark_descriptors.empty()) {
+    if (landmark_descriptors.type() != CV_8UC1 || landmark_descriptors.cols != kDescriptorBytes ||
+        landmark_descriptors.rows != static_cast<int>(landmarks_in_room.size())) {
+      out << "landmark descriptors must be " << landmarks_in_room.size() << " x "
+          << kDescriptorBytes << " bytes";
+      return out.str();
+    }
+  }
+  return "";
+}
+
+std::array<Eigen::Vector3d, 4> MarkerCornersInRoom(const Rigid3d& room_from_marker,
+                                                   double marker_size_m) {
+  std::array<Eigen::Vector3d, 4> corners = MarkerCornersInMarker(marker_size_m);
+  for (auto& c : corners) c = room_from_marker * c;
+  return corners;
+}
+
+RoomMapRecord ToRecord(const RoomMap& map, PlanId plan, std::optional<RecordingId> recording) {
+  const std::string problem = map.Validate();
+  ARPOS_CHECK(problem.empty(), "cannot store an inconsistent room map: " << problem);
+  RoomMapRecord record;
+  record.plan_id = plan;
+  record.recording_id = recording;
+  record.origin_marker_id = map.origin_marker_id;
+  record.marker_size_m = map.marker_size_m;
+  for (const auto& m : map.markers) {
+    RoomMapMarker stored;
+    stored.marker_id = m.id;
+    stored.corners_in_room = MarkerCornersInRoom(m.room_from_marker, map.marker_size_m);
+    stored.residual_px = m.residual_px;
+    stored.num_observations = m.num_observations;
+    record.markers.push_back(stored);
+  }
+  record.mean_residual_px = map.mean_residual_px;
+  record.max_residual_px = std::max(map.max_residual_px, map.mean_residual_px);
+  record.landmarks_in_room.points.reserve(map.landmarks_in_room.size());
+  for (const auto& p : map.landmarks_in_room) record.landmarks_in_room.points.push_back(p.cast<float>());
+  if (!map.landmarks_in_room.empty()) {
+    record.landmark_descriptors.resize(map.landmark_descriptors.rows, kDescriptorBytes);
+    for (int r = 0; r < map.landmark_descriptors.rows; ++r) {
+      std::copy_n(map.landmark_descriptors.ptr<std::uint8_t>(r), kDescriptorBytes,
+                  record.landmark_descriptors.row(r).data());
+    }
+  }
+  return record;
+}
+
+RoomMap FromRecord(const RoomMapRecord& record) {
+  RoomMap map;
+  map.origin_marker_id = record.origin_marker_id;
+  map.marker_size_m = record.marker_size_m;
+  if (!(record.marker_size_m > 0)) {
+    ARPOS_INPUT_ERROR("room map " << record.id.value() << ": marker size must be positive");
+  }
+  const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(record.marker_size_m);
+  const std::vector<Eigen::Vector3d> source(in_marker.begin(), in_marker.end());
+  for (const auto& stored : record.markers) {
+    RoomMapMarkerEntry m;
+    m.id = stored.marker_id;
+    const std::vector<Eigen::Vector3d> target(stored.corners_in_room.begin(),
+                                              stored.corners_in_room.end());
+    const std::optional<Sim3Result> fit = EstimateRigidTransform(source, target);
+    if (!fit) {
+      ARPOS_INPUT_ERROR("room map " << record.id.value() << ": marker " << m.id
+                                    << " has degenerate corners");
+    }
+    m.room_from_marker = fit->target_from_source;
+    m.corners_in_room = stored.corners_in_room;
+    m.residual_px = stored.residual_px;
+    m.num_observations = stored.num_observations;
+    map.markers.push_back(m);
+  }
+  std::sort(map.markers.begin(), map.markers.end(),
+            [](const RoomMapMarkerEntry& a, const RoomMapMarkerEntry& b) { return a.id < b.id; });
+  map.mean_residual_px = record.mean_residual_px;
+  map.max_residual_px = record.max_residual_px;
+  const auto& points = record.landmarks_in_room.points;
+  if (record.landmark_descriptors.rows() != static_cast<Eigen::Index>(points.size()) ||
+      (!points.empty() && record.landmark_descriptors.cols() != kDescriptorBytes)) {
+    ARPOS_INPUT_ERROR("room map " << record.id.value() << ": " << points.size()
+                                  << " landmarks but a " << record.landmark_descriptors.rows()
+                                  << " x " << record.landmark_descriptors.cols()
+                                  << " descriptor matrix (expected " << kDescriptorBytes
+                                  << " bytes per landmark)");
+  }
+  map.landmarks_in_room.reserve(points.size());
+  for (const auto& p : points) map.landmarks_in_room.push_back(p.cast<double>());
+  if (!points.empty()) {
+    map.landmark_descriptors.create(static_cast<int>(points.size()), kDescriptorBytes, CV_8UC1);
+    for (int r = 0; r < map.landmark_descriptors.rows; ++r) {
+      std::copy_n(record.landmark_descriptors.row(r).data(), kDescriptorBytes,
+                  map.landmark_descriptors.ptr<std::uint8_t>(r));
+    }
+  }
+  const std::string problem = map.Validate();
+  if (!problem.empty()) ARPOS_INPUT_ERROR("room map " << record.id.value() << ": " << problem);
+  return map;
+}
+
+}  // namespace arpos

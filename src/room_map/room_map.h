@@ -1,0 +1,76 @@
+#pragma once
+/// The planning-stage map of the treatment room, in memory.
+///
+/// Frames: everything is in the room frame, the frame of the origin marker
+/// (DATASET.md: `markers.room.origin_id`; OpenCV ArUco marker frame: origin at
+/// the printed centre, x right, y up, z out of the printed face). Metres.
+///
+/// Two layers:
+/// - markers: each room marker's pose `room_from_marker` (its corners follow
+///   from the printed side `marker_size_m`, OpenCV ArUco corner order), with
+///   its mean reprojection residual over the room sequence;
+/// - keypoint landmarks: 3D points with one binary (ORB, 32-byte) descriptor
+///   each, for localising the camera where few markers are visible.
+///
+/// The store keeps a map as a RoomMapRecord (store/records.h); ToRecord and
+/// FromRecord convert losslessly except for what the record cannot hold
+/// (per-landmark observation counts and the build report).
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "geometry/rigid3.h"
+#include "store/records.h"
+
+namespace arpos {
+
+/// ORB descriptor length in bytes.
+constexpr int kDescriptorBytes = 32;
+
+struct RoomMapMarkerEntry {
+  int id = -1;
+  Rigid3d room_from_marker;
+  std::array<Eigen::Vector3d, 4> corners_in_room{};  ///< ArUco corner order
+  double residual_px = 0;  ///< RMS reprojection residual of its corners over the room sequence
+  int num_observations = 0;
+};
+
+struct RoomMap {
+  int origin_marker_id = 0;
+  double marker_size_m = 0;
+  std::vector<RoomMapMarkerEntry> markers;  ///< sorted by id, ids unique
+  /// Landmark positions in the room frame and, row for row, their descriptors
+  /// (CV_8UC1, kDescriptorBytes columns). Both empty without a keypoint layer.
+  std::vector<Eigen::Vector3d> landmarks_in_room;
+  cv::Mat landmark_descriptors;
+  double mean_residual_px = 0;  ///< marker corners, over all markers and views
+  double max_residual_px = 0;   ///< largest per-marker residual
+
+  /// The marker with this id, or nullptr.
+  const RoomMapMarkerEntry* FindMarker(int id) const;
+  int num_landmarks() const { return static_cast<int>(landmarks_in_room.size()); }
+
+  /// Empty if consistent, else what is wrong (ids unique and sorted, origin
+  /// present, sizes and descriptor rows matching, finite numbers).
+  std::string Validate() const;
+};
+
+/// The marker's corners in the room frame from its pose and side length.
+std::array<Eigen::Vector3d, 4> MarkerCornersInRoom(const Rigid3d& room_from_marker,
+                                                   double marker_size_m);
+
+/// Converts for the store; `plan` becomes the record's plan_id.
+RoomMapRecord ToRecord(const RoomMap& map, PlanId plan,
+                       std::optional<RecordingId> recording = std::nullopt);
+/// Converts a stored map back. Marker poses are recovered from the stored
+/// corners (least squares, Kabsch). Throws InputError if the record is not a
+/// usable map (no markers, origin missing, malformed descriptors).
+RoomMap FromRecord(const RoomMapRecord& record);
+
+}  // namespace arpos

@@ -1,0 +1,833 @@
+#include "room_map/room_map_builder.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <map>
+#include <mutex>
+#include <numeric>
+#include <sstream>
+#include <thread>
+#include <unordered_map>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "room_map/camera_response.h"
+#include "room_map/marker_graph.h"
+#include "room_map/pose_refiner.h"
+#include "util/check.h"
+#include "util/logging.h"
+#include "util/string_util.h"
+
+namespace arpos {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+// What one frame contributes, computed in parallel.
+struct FrameData {
+  int index = -1;
+  std::vector<MarkerObservation> markers;  // kRefined room markers, corners undistorted
+  std::vector<MarkerPose> poses;           // parallel
+  std::vector<std::vector<DepthSample>> depth_samples;  // parallel
+  std::vector<int> all_ids_seen;           // every room id detected, refined or not
+  KeypointSet keypoints;
+  std::vector<Eigen::Vector2d> keypoint_px;  // undistorted
+  bool posed = false;
+  bool posed_by_keypoints = false;
+  Rigid3d camera_from_room;
+};
+
+std::vector<Eigen::Vector2d> UndistortPixels(const std::vector<Eigen::Vector2d>& px,
+                                             const CameraIntrinsics& k) {
+  if (!k.HasDistortion() || px.empty()) return px;
+  std::vector<cv::Point2d> in, out;
+  for (const auto& p : px) in.emplace_back(p.x(), p.y());
+  cv::undistortPoints(in, out, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
+  std::vector<Eigen::Vector2d> result;
+  for (const auto& p : out) result.emplace_back(p.x, p.y);
+  return result;
+}
+
+// Depth pixels on a grid inside the marker (marker coordinates within
+// +-0.35 side: away from the edges, where depth smears).
+std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth, double depth_scale,
+                                           const std::array<Eigen::Vector2d, 4>& corners_image_px,
+                                           const CameraIntrinsics& k, int max_samples) {
+  std::vector<DepthSample> samples;
+  if (depth.empty() || max_samples <= 0) return samples;
+  std::vector<cv::Point2f> square = {{-0.5f, 0.5f}, {0.5f, 0.5f}, {0.5f, -0.5f}, {-0.5f, -0.5f}};
+  std::vector<cv::Point2f> quad;
+  for (const auto& c : corners_image_px) quad.emplace_back(static_cast<float>(c.x()), static_cast<float>(c.y()));
+  const cv::Matx33d h = cv::getPerspectiveTransform(square, quad);
+  const int n = std::max(2, static_cast<int>(std::ceil(std::sqrt(double(max_samples)))));
+  std::vector<Eigen::Vector2d> px;
+  std::vector<float> z;
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      const double x = -0.35 + 0.7 * (i + 0.5) / n, y = -0.35 + 0.7 * (j + 0.5) / n;
+      const cv::Vec3d q = h * cv::Vec3d(x, y, 1);
+      const int u = cvRound(q[0] / q[2]), v = cvRound(q[1] / q[2]);
+      if (u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
+      const uint16_t d = depth.at<uint16_t>(v, u);
+      if (d == 0) continue;
+      px.emplace_back(u, v);
+      z.push_back(static_cast<float>(d / depth_scale));
+    }
+  }
+  const std::vector<Eigen::Vector2d> ideal = UndistortPixels(px, k);
+  for (size_t i = 0; i < ideal.size() && static_cast<int>(samples.size()) < max_samples; ++i) {
+    samples.push_back({ideal[i].cast<float>(), z[i]});
+  }
+  return samples;
+}
+
+// One landmark candidate while associating.
+struct Candidate {
+  Eigen::Vector3d weighted_sum = Eigen::Vector3d::Zero();
+  double weight = 0;
+  std::vector<std::pair<int, int>> observations;  // (frame slot, keypoint index)
+  int descriptor_frame = -1, descriptor_index = -1;  // representative for matching
+  int last_frame = -1;
+  Eigen::Vector3d Position() const { return weighted_sum / weight; }
+};
+
+const std::uint8_t* Descriptor(const std::vector<FrameData>& frames, int slot, int kp) {
+  return frames[slot].keypoints.descriptors.ptr<std::uint8_t>(kp);
+}
+
+}  // namespace
+
+ExclusionBox CouchExclusionBox(const Rigid3d& room_from_model_target, double half_width_m,
+                               double anterior_m, double posterior_m, double half_length_m) {
+  ExclusionBox box;
+  // Model frame (LPS): y posterior. The box spans y in [-anterior, +posterior].
+  const Eigen::Vector3d centre_in_model(0, 0.5 * (posterior_m - anterior_m), 0);
+  box.room_from_box = room_from_model_target * Rigid3d(Eigen::Quaterniond::Identity(), centre_in_model);
+  box.half_extent_m = Eigen::Vector3d(half_width_m, 0.5 * (posterior_m + anterior_m), half_length_m);
+  return box;
+}
+
+std::string RoomMapBuildOptions::Validate() const {
+  std::ostringstream out;
+  std::string r;
+  if (!detector.Check(&r)) out << "detector: " << r;
+  else if (!marker_pose.Check(&r)) out << "marker_pose: " << r;
+  else if (!keypoints.Check(&r)) out << "keypoints: " << r;
+  else if (!bundle_adjustment.Check(&r)) out << "bundle_adjustment: " << r;
+  else if (frame_step < 1) out << "frame_step must be at least 1, got " << frame_step;
+  else if (max_frames < 0) out << "max_frames must not be negative";
+  else if (threads < 1) out << "threads must be at least 1";
+  else if (!(marker_corner_sigma_px > 0) || !(keypoint_sigma_px > 0)) out << "sigmas must be positive";
+  else if (!(max_marker_view_rms_px > 0)) out << "max_marker_view_rms_px must be positive";
+  else if (marker_depth_samples < 0) out << "marker_depth_samples must not be negative";
+  else if (!(association_radius_px > 0)) out << "association_radius_px must be positive";
+  else if (max_hamming < 1 || max_hamming > 256) out << "max_hamming must be in 1..256";
+  else if (min_landmark_observations < 2) out << "min_landmark_observations must be at least 2";
+  else if (max_landmarks < 0) out << "max_landmarks must not be negative";
+  else if (!(landmark_voxel_m > 0)) out << "landmark_voxel_m must be positive";
+  else if (!(outlier_sigmas > 0)) out << "outlier_sigmas must be positive";
+  return out.str();
+}
+
+bool RoomMapBuildOptions::Check(std::string* reason) const {
+  const std::string r = Validate();
+  if (reason) *reason = r;
+  return r.empty();
+}
+
+RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseConfig& config) {
+  RoomMapBuildOptions options;
+  options.detector.dictionary = config.dictionary;
+  options.detector.id_ranges = {{config.room_markers.id_min, config.room_markers.id_max}};
+  options.detector.intrinsics = config.camera;
+  options.keypoints.max_keypoints = 1000;
+  return options;
+}
+
+std::string RoomMapBuildReport::ToText() const {
+  std::ostringstream out;
+  out << StringPrintf("frames: %d used of %d (%d with markers, %d posed by keypoints)\n", frames_used,
+                      frames_total, frames_with_markers, frames_posed_by_keypoints);
+  out << StringPrintf("marker views: %d (%d single-view poses ambiguous, not used to initialise)\n",
+                      marker_views, ambiguous_marker_views);
+  if (!unconnected_markers.empty()) {
+    out << "markers not connected to the origin (left out):";
+    for (int id : unconnected_markers) out << " " << id;
+    out << "\n";
+  }
+  out << StringPrintf("landmarks: %d kept of %d candidates (%d in exclusion boxes), %d observations\n",
+                      landmarks, landmark_candidates, landmarks_excluded, keypoint_observations);
+  out << StringPrintf("residuals: marker corners %.3f px RMS, keypoints %.3f px RMS, keypoint depth %.2f mm RMS\n",
+                      marker_rms_px, keypoint_rms_px, keypoint_depth_rms_m * 1000);
+  out << StringPrintf("depth scale check (measured / map-predicted depth in markers): %.4f (MAD %.4f)\n",
+                      depth_scale_ratio, depth_scale_ratio_mad);
+  out << StringPrintf("adjustment: markers %d it %.2f s; joint %d it %.2f s\n",
+                      marker_adjustment.iterations, marker_adjustment.seconds,
+                      joint_adjustment.iterations, joint_adjustment.seconds);
+  out << StringPrintf("time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, adjustment %.2f s, total %.2f s\n",
+                      frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
+  for (const auto& w : warnings) out << "warning: " << w << "\n";
+  return out.str();
+}
+
+RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& config,
+                                const RoomMapBuildOptions& options,
+                                const ControllerCallbacks& callbacks) {
+  std::string reason;
+  ARPOS_CHECK(options.Check(&reason), "invalid room map options: " << reason);
+  const auto t_start = Clock::now();
+  RoomMapBuildResult result;
+  RoomMapBuildReport& report = result.report;
+  const CameraIntrinsics& K = config.camera;
+  const double marker_size = config.room_markers.size_m;
+  const int origin_id = config.room_origin_id;
+
+  auto progress = [&](const std::string& step, double fraction) {
+    if (callbacks.progress) callbacks.progress(step, fraction);
+    if (callbacks.cancel_requested && callbacks.cancel_requested()) throw Cancelled();
+  };
+
+  // ---------------------------------------------------------------- 1. frames
+  std::vector<int> indices;
+  for (size_t i = 0; i < sequence.size(); i += options.frame_step) {
+    indices.push_back(static_cast<int>(i));
+    if (options.max_frames > 0 && static_cast<int>(indices.size()) >= options.max_frames) break;
+  }
+  report.frames_total = static_cast<int>(indices.size());
+  if (indices.empty()) ARPOS_INPUT_ERROR(sequence.folder().string() << ": the room sequence has no frames");
+  std::vector<FrameData> frames(indices.size());
+  {
+    progress("detecting markers and keypoints", 0.0);
+    std::atomic<int> next{0}, done{0};
+    std::atomic<bool> stop{false};
+    std::exception_ptr error;
+    std::mutex error_mutex;
+    auto worker = [&]() {
+      try {
+        MarkerDetector detector(options.detector);
+        KeypointExtractor extractor(options.keypoints);
+        cv::Mat gray, linear;
+        std::vector<MarkerObservation> detected;
+        while (!stop) {
+          const int slot = next++;
+          if (slot >= static_cast<int>(indices.size())) break;
+          FrameData& f = frames[slot];
+          f.index = indices[slot];
+          const RgbdFrame frame = sequence.LoadFrame(f.index, K);
+          cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+          if (options.linearize_srgb) {
+            LinearizeSrgb(gray, &linear);
+            detector.Detect(linear, &detected);
+          } else {
+            detector.Detect(gray, &detected);
+          }
+          for (const auto& obs : detected) {
+            f.all_ids_seen.push_back(obs.id);
+            if (!obs.IsPrecise()) continue;
+            MarkerPose pose = EstimateMarkerPose(obs, marker_size, K, frame.depth, options.marker_pose);
+            std::vector<DepthSample> samples =
+                SampleMarkerDepth(frame.depth, K.depth_scale, obs.corners_px, K, options.marker_depth_samples);
+            MarkerObservation ideal = obs;
+            const std::vector<Eigen::Vector2d> c =
+                UndistortPixels({obs.corners_px.begin(), obs.corners_px.end()}, K);
+            for (int k = 0; k < 4; ++k) ideal.corners_px[k] = c[k];
+            f.markers.push_back(ideal);
+            f.poses.push_back(pose);
+            f.depth_samples.push_back(std::move(samples));
+          }
+          if (options.use_keypoints) {
+            extractor.Extract(gray, frame.depth, K.depth_scale, &f.keypoints);
+            std::vector<Eigen::Vector2d> px;
+            px.reserve(f.keypoints.size());
+            for (const auto& kp : f.keypoints.keypoints) px.emplace_back(kp.pt.x, kp.pt.y);
+            f.keypoint_px = UndistortPixels(px, K);
+          }
+          ++done;
+        }
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (!error) error = std::current_exception();
+        stop = true;
+      }
+    };
+    std::vector<std::thread> workers;
+    const int n_threads = std::min<int>(options.threads, static_cast<int>(indices.size()));
+    for (int t = 0; t < n_threads; ++t) workers.emplace_back(worker);
+    try {
+      while (done < static_cast<int>(indices.size()) && !stop) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        progress(StringPrintf("detecting markers and keypoints (%d/%zu frames)", done.load(), indices.size()),
+                 0.5 * done / indices.size());
+      }
+    } catch (...) {
+      stop = true;
+      for (auto& w : workers) w.join();
+      throw;
+    }
+    for (auto& w : workers) w.join();
+    if (error) std::rethrow_exception(error);
+  }
+  report.frames_s = SecondsSince(t_start);
+
+  // ---------------------------------------------------------------- 2. initialisation
+  const auto t_init = Clock::now();
+  progress("initialising the marker map", 0.5);
+  bool origin_seen = false;
+  std::vector<MarkerView> views;
+  for (size_t s = 0; s < frames.size(); ++s) {
+    const FrameData& f = frames[s];
+    for (int id : f.all_ids_seen) origin_seen |= id == origin_id;
+    if (!f.markers.empty()) ++report.frames_with_markers;
+    report.marker_views += static_cast<int>(f.markers.size());
+    for (size_t m = 0; m < f.markers.size(); ++m) {
+      const MarkerPose& p = f.poses[m];
+      if (p.status != MarkerPoseStatus::kOk || p.reprojection_rms_px > options.max_marker_view_rms_px) {
+        ++report.ambiguous_marker_views;
+        continue;
+      }
+      views.push_back({static_cast<int>(s), f.markers[m].id, p.camera_from_marker, f.markers[m].corners_px,
+                       p.reprojection_rms_px});
+    }
+  }
+  if (!origin_seen) {
+    ARPOS_INPUT_ERROR(sequence.folder().string()
+                      << ": the origin marker (id " << origin_id
+                      << ", case.yaml markers.room.origin_id) is never seen in the room sequence, so the "
+                         "room frame is undefined; record the room again with the origin marker in view");
+  }
+  const MarkerGraphResult graph = InitializeMarkerPoses(views, origin_id, marker_size, K);
+  if (graph.room_from_marker.empty()) {
+    ARPOS_INPUT_ERROR(sequence.folder().string()
+                      << ": the origin marker (id " << origin_id
+                      << ") is seen but never sharply enough for a pose (blurred, occluded or too "
+                         "small); record the room again with the origin marker clearly in view");
+  }
+  report.unconnected_markers = graph.unconnected_markers;
+  if (!graph.unconnected_markers.empty()) {
+    report.warnings.push_back(StringPrintf("%zu marker(s) never seen together with the mapped ones; left out",
+                                           graph.unconnected_markers.size()));
+  }
+  // Marker index in the adjustment.
+  BaProblem ba;
+  ba.intrinsics = K;
+  ba.marker_size_m = marker_size;
+  std::vector<int> marker_ids;
+  std::map<int, int> marker_slot;
+  auto add_marker = [&](int id, const Rigid3d& room_from_marker) {
+    marker_slot[id] = static_cast<int>(marker_ids.size());
+    marker_ids.push_back(id);
+    ba.room_from_marker.push_back(room_from_marker);
+    ba.marker_fixed.push_back(id == origin_id);
+  };
+  for (const auto& [id, pose] : graph.room_from_marker) add_marker(id, pose);
+  auto known_markers = [&]() {
+    std::map<int, Rigid3d> known;
+    for (size_t m = 0; m < marker_ids.size(); ++m) known[marker_ids[m]] = ba.room_from_marker[m];
+    return known;
+  };
+  // Camera pose of a frame from its known markers.
+  auto pose_by_markers = [&](FrameData& f, const std::map<int, Rigid3d>& known) {
+    std::vector<MarkerView> fv;
+    for (size_t m = 0; m < f.markers.size(); ++m) {
+      if (!known.count(f.markers[m].id)) continue;
+      const MarkerPose& p = f.poses[m];
+      fv.push_back({f.index, f.markers[m].id, p.camera_from_marker, f.markers[m].corners_px, p.reprojection_rms_px});
+    }
+    double rms = 0;
+    const std::optional<Rigid3d> pose = CameraFromRoomFromMarkers(fv, known, marker_size, K, &rms);
+    if (pose && rms < 3.0) {
+      f.posed = true;
+      f.camera_from_room = *pose;
+    }
+    return f.posed;
+  };
+  {
+    const std::map<int, Rigid3d> known = known_markers();
+    for (auto& f : frames) pose_by_markers(f, known);
+  }
+
+  // Markers-only adjustment.
+  std::vector<int> camera_slot(frames.size(), -1), camera_frame;
+  auto rebuild_cameras = [&]() {
+    ba.camera_from_room.clear();
+    camera_frame.clear();
+    for (size_t s = 0; s < frames.size(); ++s) {
+      camera_slot[s] = -1;
+      if (!frames[s].posed) continue;
+      camera_slot[s] = static_cast<int>(ba.camera_from_room.size());
+      camera_frame.push_back(static_cast<int>(s));
+      ba.camera_from_room.push_back(frames[s].camera_from_room);
+    }
+  };
+  auto collect_marker_observations = [&]() {
+    ba.marker_observations.clear();
+    for (size_t s = 0; s < frames.size(); ++s) {
+      if (camera_slot[s] < 0) continue;
+      const FrameData& f = frames[s];
+      for (size_t m = 0; m < f.markers.size(); ++m) {
+        auto it = marker_slot.find(f.markers[m].id);
+        if (it == marker_slot.end()) continue;
+        BaMarkerObservation o;
+        o.camera = camera_slot[s];
+        o.marker = it->second;
+        o.corners_px = f.markers[m].corners_px;
+        for (int k = 0; k < 4; ++k) {
+          o.sigma_px[k] = std::max(options.marker_corner_sigma_px, f.markers[m].corner_sigma_px[k]);
+        }
+        o.depth_samples = f.depth_samples[m];
+        ba.marker_observations.push_back(std::move(o));
+      }
+    }
+  };
+  auto adjust_markers = [&](BaSummary* summary) {
+    rebuild_cameras();
+    collect_marker_observations();
+    ba.landmarks_in_room.clear();
+    ba.keypoint_observations.clear();
+    BaOptions marker_ba_options = options.bundle_adjustment;
+    marker_ba_options.threads = options.threads;
+    *summary = RunBundleAdjustment(&ba, marker_ba_options);
+    for (size_t c = 0; c < camera_frame.size(); ++c) frames[camera_frame[c]].camera_from_room = ba.camera_from_room[c];
+  };
+  adjust_markers(&report.marker_adjustment);
+  report.initialisation_s = SecondsSince(t_init);
+
+  // ---------------------------------------------------------------- 3. landmarks
+  // Frames without known markers are posed by keypoints against landmarks of
+  // nearby posed frames; markers seen only there join from those poses; this
+  // repeats until nothing changes.
+  const auto t_landmarks = Clock::now();
+  progress("associating keypoints", 0.6);
+  std::vector<Candidate> candidates;
+  std::vector<Eigen::Vector3d> landmarks;
+  std::vector<BaKeypointObservation> keypoint_observations;
+  std::vector<std::pair<int, int>> keypoint_source;  // (frame slot, keypoint), parallel
+  std::vector<std::vector<int>> frame_candidates(frames.size());
+  std::vector<bool> associated(frames.size(), false);
+  const BaOptions& bo = options.bundle_adjustment;
+  // Associates the keypoints of frame slot s (posed) with the candidates.
+  auto associate = [&](int s) {
+    associated[s] = true;
+    if (!options.use_keypoints) return;
+    FrameData& f = frames[s];
+    const Rigid3d room_from_camera = f.camera_from_room.Inverse();
+    // Project candidates into a coarse grid (CSR layout).
+    const int cell = 8;
+    const int cols = (K.width + cell - 1) / cell, rows = (K.height + cell - 1) / cell;
+    std::vector<std::pair<int, int>> projected;  // (cell, candidate)
+    std::vector<Eigen::Vector2d> uv_of(candidates.size());
+    for (size_t c = 0; c < candidates.size(); ++c) {
+      const Eigen::Vector3d p = f.camera_from_room * candidates[c].Position();
+      if (p.z() <= 0.1) continue;
+      const Eigen::Vector2d uv = K.Project(p);
+      if (uv.x() < 0 || uv.y() < 0 || uv.x() >= K.width || uv.y() >= K.height) continue;
+      uv_of[c] = uv;
+      projected.emplace_back(static_cast<int>(uv.y() / cell) * cols + static_cast<int>(uv.x() / cell),
+                             static_cast<int>(c));
+    }
+    std::sort(projected.begin(), projected.end());
+    std::vector<int> start(cols * rows + 1, 0);
+    for (const auto& pc : projected) ++start[pc.first + 1];
+    for (int c = 0; c < cols * rows; ++c) start[c + 1] += start[c];
+    for (size_t i = 0; i < f.keypoints.size(); ++i) {
+      const float z = f.keypoints.depth_m[i];
+      if (z <= 0) continue;
+      const Eigen::Vector2d& uv = f.keypoint_px[i];
+      const Eigen::Vector3d in_room = room_from_camera * K.Unproject(uv.x(), uv.y(), z);
+      const double max_dist = std::max(options.association_min_distance_m, 3 * bo.DepthSigmaM(z));
+      const std::uint8_t* d = f.keypoints.descriptors.ptr<std::uint8_t>(static_cast<int>(i));
+      int best = -1, best_dist = options.max_hamming + 1;
+      const int r = static_cast<int>(std::ceil(options.association_radius_px / cell));
+      const int cu = static_cast<int>(uv.x() / cell), cv_ = static_cast<int>(uv.y() / cell);
+      for (int dv = -r; dv <= r; ++dv) {
+        for (int du = -r; du <= r; ++du) {
+          const int gu = cu + du, gv = cv_ + dv;
+          if (gu < 0 || gv < 0 || gu >= cols || gv >= rows) continue;
+          const int g = gv * cols + gu;
+          for (int k = start[g]; k < start[g + 1]; ++k) {
+            const int c = projected[k].second;
+            if ((uv_of[c] - uv).norm() > options.association_radius_px) continue;
+            const Candidate& cand = candidates[c];
+            if (cand.last_frame == s) continue;
+            if ((cand.Position() - in_room).norm() > max_dist) continue;
+            const int dist = HammingDistance32(d, Descriptor(frames, cand.descriptor_frame, cand.descriptor_index));
+            if (dist < best_dist) {
+              best_dist = dist;
+              best = c;
+            }
+          }
+        }
+      }
+      const double sigma = bo.DepthSigmaM(z);
+      const double w = 1.0 / (sigma * sigma);
+      if (best < 0) {
+        best = static_cast<int>(candidates.size());
+        candidates.emplace_back();
+        candidates.back().descriptor_frame = s;
+        candidates.back().descriptor_index = static_cast<int>(i);
+      }
+      Candidate& cand = candidates[best];
+      cand.weighted_sum += w * in_room;
+      cand.weight += w;
+      cand.observations.push_back({s, static_cast<int>(i)});
+      cand.last_frame = s;
+      frame_candidates[s].push_back(best);
+    }
+  };
+  // PnP of an unposed frame on the candidates of posed frames near it.
+  auto pose_by_keypoints = [&](int s) {
+    FrameData& f = frames[s];
+    if (!options.use_keypoints || f.keypoints.size() < 20) return false;
+    std::vector<int> pool;
+    for (int n = std::max(0, s - 4); n <= std::min<int>(static_cast<int>(frames.size()) - 1, s + 4); ++n) {
+      if (associated[n]) pool.insert(pool.end(), frame_candidates[n].begin(), frame_candidates[n].end());
+    }
+    std::sort(pool.begin(), pool.end());
+    pool.erase(std::unique(pool.begin(), pool.end()), pool.end());
+    if (pool.size() < 20) return false;
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    for (size_t i = 0; i < f.keypoints.size(); ++i) {
+      const std::uint8_t* d = f.keypoints.descriptors.ptr<std::uint8_t>(static_cast<int>(i));
+      int best = -1, d1 = 257, d2 = 257;
+      for (int c : pool) {
+        const int dist =
+            HammingDistance32(d, Descriptor(frames, candidates[c].descriptor_frame, candidates[c].descriptor_index));
+        if (dist < d1) {
+          d2 = d1;
+          d1 = dist;
+          best = c;
+        } else if (dist < d2) {
+          d2 = dist;
+        }
+      }
+      if (best < 0 || d1 > options.max_hamming || d1 > 0.8 * d2) continue;
+      const Eigen::Vector3d X = candidates[best].Position();
+      object.emplace_back(X.x(), X.y(), X.z());
+      image.emplace_back(f.keypoint_px[i].x(), f.keypoint_px[i].y());
+    }
+    if (object.size() < 15) return false;
+    cv::Mat rvec, tvec;
+    std::vector<int> inliers;
+    const bool ok = cv::solvePnPRansac(object, image, K.CvK(), cv::noArray(), rvec, tvec, false, 300, 3.0, 0.999,
+                                       inliers, cv::SOLVEPNP_AP3P);
+    if (!ok || inliers.size() < 20) return false;
+    PoseCorrespondences corr;
+    for (int i : inliers) {
+      corr.Add(Eigen::Vector3d(object[i].x, object[i].y, object[i].z), Eigen::Vector2d(image[i].x, image[i].y),
+               options.keypoint_sigma_px, CorrespondenceGroup::kKeypoint, i);
+    }
+    const Eigen::Vector3d rv(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
+    const Eigen::Vector3d tv(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
+    const PoseRefinementResult refined = RefineCameraPose(corr, K, Rigid3d::FromRotationVector(rv, tv));
+    if (refined.keypoint_inliers < 20 || refined.keypoint_rms_px > 2.0) return false;
+    f.posed = true;
+    f.posed_by_keypoints = true;
+    f.camera_from_room = refined.camera_from_room;
+    ++report.frames_posed_by_keypoints;
+    return true;
+  };
+  // Markers seen only in frames posed without them: from their best view.
+  auto add_new_markers = [&]() {
+    std::map<int, std::pair<double, Rigid3d>> best;  // id -> (score, room_from_marker)
+    for (const auto& f : frames) {
+      if (!f.posed) continue;
+      for (size_t m = 0; m < f.markers.size(); ++m) {
+        const int id = f.markers[m].id;
+        const MarkerPose& p = f.poses[m];
+        if (marker_slot.count(id) || p.status != MarkerPoseStatus::kOk) continue;
+        const double score = p.camera_from_marker.translation.norm() / std::max(1.0, f.markers[m].MeanSidePx());
+        auto it = best.find(id);
+        if (it == best.end() || score < it->second.first) {
+          best[id] = {score, f.camera_from_room.Inverse() * p.camera_from_marker};
+        }
+      }
+    }
+    for (const auto& [id, sp] : best) add_marker(id, sp.second);
+    return !best.empty();
+  };
+  for (size_t s = 0; s < frames.size(); ++s) {
+    if (frames[s].posed) associate(static_cast<int>(s));
+  }
+  for (int round = 0; round < 20; ++round) {
+    bool changed = false;
+    // Forward then backward, so chains of frames propagate both ways.
+    for (int pass = 0; pass < 2; ++pass) {
+      for (int k = 0; k < static_cast<int>(frames.size()); ++k) {
+        const int s = pass == 0 ? k : static_cast<int>(frames.size()) - 1 - k;
+        if (frames[s].posed) continue;
+        if (pose_by_markers(frames[s], known_markers()) || pose_by_keypoints(s)) {
+          associate(s);
+          changed = true;
+        }
+      }
+    }
+    changed |= add_new_markers();
+    if (!changed) break;
+  }
+  {
+    std::vector<int> still;
+    for (int id : graph.unconnected_markers) {
+      if (!marker_slot.count(id)) still.push_back(id);
+    }
+    report.unconnected_markers = still;
+    report.warnings.erase(std::remove_if(report.warnings.begin(), report.warnings.end(),
+                                         [](const std::string& w) { return w.find("never seen together") != std::string::npos; }),
+                          report.warnings.end());
+    if (!still.empty()) {
+      report.warnings.push_back(StringPrintf("%zu marker(s) could not be linked to the mapped ones; left out", still.size()));
+    }
+  }
+  if (options.use_keypoints) {
+    report.landmark_candidates = static_cast<int>(candidates.size());
+
+    // Selection: seen often enough, outside the exclusion boxes, spread over voxels.
+    std::vector<int> kept;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+      if (static_cast<int>(candidates[c].observations.size()) < options.min_landmark_observations) continue;
+      const Eigen::Vector3d X = candidates[c].Position();
+      bool excluded = false;
+      for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(X);
+      if (excluded) {
+        ++report.landmarks_excluded;
+        continue;
+      }
+      kept.push_back(static_cast<int>(c));
+    }
+    if (static_cast<int>(kept.size()) > options.max_landmarks) {
+      std::map<std::tuple<int, int, int>, std::vector<int>> voxels;
+      for (int c : kept) {
+        const Eigen::Vector3d X = candidates[c].Position() / options.landmark_voxel_m;
+        voxels[{static_cast<int>(std::floor(X.x())), static_cast<int>(std::floor(X.y())),
+                static_cast<int>(std::floor(X.z()))}]
+            .push_back(c);
+      }
+      for (auto& [key, list] : voxels) {
+        std::sort(list.begin(), list.end(), [&](int a, int b) {
+          return candidates[a].observations.size() > candidates[b].observations.size();
+        });
+      }
+      std::vector<int> thinned;
+      for (size_t rank = 0; static_cast<int>(thinned.size()) < options.max_landmarks; ++rank) {
+        std::vector<int> layer;
+        for (const auto& [key, list] : voxels) {
+          if (rank < list.size()) layer.push_back(list[rank]);
+        }
+        if (layer.empty()) break;
+        std::sort(layer.begin(), layer.end(), [&](int a, int b) {
+          return candidates[a].observations.size() > candidates[b].observations.size();
+        });
+        for (int c : layer) {
+          if (static_cast<int>(thinned.size()) >= options.max_landmarks) break;
+          thinned.push_back(c);
+        }
+      }
+      kept = std::move(thinned);
+    }
+    // Landmarks and their observations for the adjustment.
+    rebuild_cameras();
+    for (int c : kept) {
+      const int landmark = static_cast<int>(landmarks.size());
+      landmarks.push_back(candidates[c].Position());
+      for (const auto& [s, i] : candidates[c].observations) {
+        BaKeypointObservation o;
+        o.camera = camera_slot[s];
+        o.landmark = landmark;
+        o.pixel = frames[s].keypoint_px[i];
+        o.sigma_px = options.keypoint_sigma_px;
+        o.depth_m = frames[s].keypoints.depth_m[i];
+        keypoint_observations.push_back(o);
+        keypoint_source.emplace_back(s, i);
+      }
+    }
+  }
+  report.landmarks_s = SecondsSince(t_landmarks);
+
+  // ---------------------------------------------------------------- 4. joint adjustment
+  const auto t_adjust = Clock::now();
+  progress("bundle adjustment", 0.7);
+  rebuild_cameras();
+  collect_marker_observations();
+  ba.landmarks_in_room = landmarks;
+  ba.keypoint_observations = keypoint_observations;
+  BaOptions joint_options = options.bundle_adjustment;
+  joint_options.threads = options.threads;
+  report.joint_adjustment = RunBundleAdjustment(&ba, joint_options);
+  // Drop outlier observations and adjust again.
+  {
+    const BaResiduals res = ComputeBaResiduals(ba);
+    std::vector<BaKeypointObservation> kept;
+    std::vector<std::pair<int, int>> kept_source;
+    for (size_t i = 0; i < ba.keypoint_observations.size(); ++i) {
+      const auto& o = ba.keypoint_observations[i];
+      const bool px_ok = res.keypoint_px[i] < options.outlier_sigmas * o.sigma_px;
+      const bool z_ok = !(o.depth_m > 0) ||
+                        std::abs(res.keypoint_depth_m[i]) < options.outlier_sigmas * joint_options.DepthSigmaM(o.depth_m);
+      if (px_ok && z_ok) {
+        kept.push_back(o);
+        kept_source.push_back(keypoint_source[i]);
+      }
+    }
+    std::vector<BaMarkerObservation> kept_markers;
+    for (size_t i = 0; i < ba.marker_observations.size(); ++i) {
+      if (res.marker_rms_px[i] < std::max(1.0, options.outlier_sigmas * options.marker_corner_sigma_px * 2.5)) {
+        kept_markers.push_back(ba.marker_observations[i]);
+      }
+    }
+    // Landmarks keep at least two observations.
+    std::vector<int> count(ba.landmarks_in_room.size(), 0);
+    for (const auto& o : kept) ++count[o.landmark];
+    std::vector<int> remap(ba.landmarks_in_room.size(), -1);
+    std::vector<Eigen::Vector3d> new_landmarks;
+    for (size_t l = 0; l < count.size(); ++l) {
+      if (count[l] >= 2) {
+        remap[l] = static_cast<int>(new_landmarks.size());
+        new_landmarks.push_back(ba.landmarks_in_room[l]);
+      }
+    }
+    std::vector<BaKeypointObservation> remapped;
+    std::vector<std::pair<int, int>> remapped_source;
+    for (size_t i = 0; i < kept.size(); ++i) {
+      BaKeypointObservation o = kept[i];
+      if (remap[o.landmark] < 0) continue;
+      o.landmark = remap[o.landmark];
+      remapped.push_back(o);
+      remapped_source.push_back(kept_source[i]);
+    }
+    keypoint_source = std::move(remapped_source);
+    const bool changed = remapped.size() != ba.keypoint_observations.size() ||
+                         kept_markers.size() != ba.marker_observations.size();
+    ba.landmarks_in_room = std::move(new_landmarks);
+    ba.keypoint_observations = std::move(remapped);
+    ba.marker_observations = std::move(kept_markers);
+    if (changed) {
+      progress("bundle adjustment (outliers removed)", 0.85);
+      const BaSummary second = RunBundleAdjustment(&ba, joint_options);
+      report.joint_adjustment.iterations += second.iterations;
+      report.joint_adjustment.seconds += second.seconds;
+      report.joint_adjustment.final_cost = second.final_cost;
+      report.joint_adjustment.message = second.message;
+      report.joint_adjustment.usable = second.usable;
+    }
+  }
+  for (size_t c = 0; c < camera_frame.size(); ++c) frames[camera_frame[c]].camera_from_room = ba.camera_from_room[c];
+  report.adjustment_s = SecondsSince(t_adjust);
+
+  // ---------------------------------------------------------------- 5. the map
+  progress("residuals and map", 0.95);
+  const BaResiduals res = ComputeBaResiduals(ba);
+  RoomMap& map = result.map;
+  map.origin_marker_id = origin_id;
+  map.marker_size_m = marker_size;
+  std::vector<double> sum2(marker_ids.size(), 0);
+  std::vector<int> n_obs(marker_ids.size(), 0);
+  double all2 = 0;
+  for (size_t i = 0; i < ba.marker_observations.size(); ++i) {
+    const int m = ba.marker_observations[i].marker;
+    sum2[m] += res.marker_rms_px[i] * res.marker_rms_px[i];
+    all2 += res.marker_rms_px[i] * res.marker_rms_px[i];
+    ++n_obs[m];
+  }
+  double mean_sum = 0;
+  int mean_n = 0;
+  for (size_t m = 0; m < marker_ids.size(); ++m) {
+    if (n_obs[m] == 0) continue;  // every observation rejected: not trustworthy
+    RoomMapMarkerEntry e;
+    e.id = marker_ids[m];
+    e.room_from_marker = ba.room_from_marker[m];
+    e.corners_in_room = MarkerCornersInRoom(e.room_from_marker, marker_size);
+    e.residual_px = std::sqrt(sum2[m] / n_obs[m]);
+    e.num_observations = n_obs[m];
+    map.max_residual_px = std::max(map.max_residual_px, e.residual_px);
+    mean_sum += e.residual_px * n_obs[m];
+    mean_n += n_obs[m];
+    map.markers.push_back(e);
+  }
+  std::sort(map.markers.begin(), map.markers.end(),
+            [](const RoomMapMarkerEntry& a, const RoomMapMarkerEntry& b) { return a.id < b.id; });
+  map.mean_residual_px = mean_n ? mean_sum / mean_n : 0;
+  map.max_residual_px = std::max(map.max_residual_px, map.mean_residual_px);
+  report.marker_rms_px = ba.marker_observations.empty() ? 0 : std::sqrt(all2 / ba.marker_observations.size());
+
+  // Landmark descriptors: the medoid of each landmark's observations.
+  if (!ba.landmarks_in_room.empty()) {
+    std::vector<std::vector<const std::uint8_t*>> descs(ba.landmarks_in_room.size());
+    for (size_t k = 0; k < ba.keypoint_observations.size(); ++k) {
+      const auto& [s, i] = keypoint_source[k];
+      descs[ba.keypoint_observations[k].landmark].push_back(Descriptor(frames, s, i));
+    }
+    map.landmarks_in_room = ba.landmarks_in_room;
+    map.landmark_descriptors.create(static_cast<int>(ba.landmarks_in_room.size()), kDescriptorBytes, CV_8UC1);
+    for (size_t l = 0; l < descs.size(); ++l) {
+      const auto& d = descs[l];
+      size_t best = 0;
+      int best_sum = INT32_MAX;
+      for (size_t a = 0; a < d.size(); ++a) {
+        int sum = 0;
+        for (size_t b = 0; b < d.size(); ++b) sum += HammingDistance32(d[a], d[b]);
+        if (sum < best_sum) {
+          best_sum = sum;
+          best = a;
+        }
+      }
+      if (!d.empty()) std::copy_n(d[best], kDescriptorBytes, map.landmark_descriptors.ptr<std::uint8_t>(static_cast<int>(l)));
+    }
+  }
+  report.landmarks = map.num_landmarks();
+  report.keypoint_observations = static_cast<int>(ba.keypoint_observations.size());
+  {
+    double s2 = 0, z2 = 0;
+    int nz = 0;
+    for (size_t i = 0; i < res.keypoint_px.size(); ++i) {
+      s2 += res.keypoint_px[i] * res.keypoint_px[i];
+      if (std::isfinite(res.keypoint_depth_m[i])) {
+        z2 += res.keypoint_depth_m[i] * res.keypoint_depth_m[i];
+        ++nz;
+      }
+    }
+    report.keypoint_rms_px = res.keypoint_px.empty() ? 0 : std::sqrt(s2 / res.keypoint_px.size());
+    report.keypoint_depth_rms_m = nz ? std::sqrt(z2 / nz) : 0;
+  }
+  {
+    std::vector<double> ratios;
+    for (double r : res.marker_depth_ratio) {
+      if (std::isfinite(r)) ratios.push_back(r);
+    }
+    if (!ratios.empty()) {
+      std::sort(ratios.begin(), ratios.end());
+      report.depth_scale_ratio = ratios[ratios.size() / 2];
+      std::vector<double> dev;
+      for (double r : ratios) dev.push_back(std::abs(r - report.depth_scale_ratio));
+      std::sort(dev.begin(), dev.end());
+      report.depth_scale_ratio_mad = dev[dev.size() / 2];
+      if (std::abs(report.depth_scale_ratio - 1) > 0.01) {
+        report.warnings.push_back(StringPrintf(
+            "measured depth in the markers is %.2f %% off the map's: check the printed marker size "
+            "(case.yaml markers.room.size_m) and the depth scale",
+            100 * (report.depth_scale_ratio - 1)));
+      }
+    }
+  }
+  for (size_t c = 0; c < camera_frame.size(); ++c) {
+    report.room_from_camera.emplace_back(frames[camera_frame[c]].index, ba.camera_from_room[c].Inverse());
+  }
+  report.frames_used = static_cast<int>(camera_frame.size());
+  if (report.frames_used < report.frames_total) {
+    report.warnings.push_back(StringPrintf("%d of %d frames could not be posed and were left out",
+                                           report.frames_total - report.frames_used, report.frames_total));
+  }
+  const std::string problem = map.Validate();
+  ARPOS_CHECK(problem.empty(), "built an inconsistent room map: " << problem);
+  report.total_s = SecondsSince(t_start);
+  ARPOS_DEBUG("room map:\n" << report.ToText());
+  return result;
+}
+
+}  // namespace arpos

@@ -1,0 +1,149 @@
+#pragma once
+/// Builds the room map (room_map.h) from the planning sequence `room/`.
+///
+/// Steps:
+///  1. per frame (in parallel): room-marker detection with edge-fit corners
+///     (features/marker_detector.h), single-marker poses (IPPE, both solutions,
+///     error-ratio test and depth: features/marker_pose.h), depth samples
+///     inside each marker, grid-spread ORB keypoints with depth (keypoints.h);
+///  2. marker poses initialised by a MarkerMapper-style pose graph
+///     (marker_graph.h), camera poses from all their markers;
+///  3. bundle adjustment over markers and cameras (corners + marker-plane depth);
+///  4. keypoint landmarks: back-projected with depth, associated across frames
+///     by projection and descriptor, frames without markers posed by PnP on
+///     the landmarks; landmarks seen often enough, outside the exclusion
+///     boxes (things that move during treatment: the couch top), thinned to a
+///     few thousand spread over the room;
+///  5. joint bundle adjustment (markers, cameras, landmarks; reprojection +
+///     depth), outlier observations dropped, adjusted again;
+///  6. residuals per marker and overall, and the depth scale check (measured
+///     depth in markers / depth the map predicts: 1.000 if consistent).
+///
+/// Frames: the result is in the room frame, the origin marker's. Units SI.
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "controllers/controller.h"
+#include "features/marker_detector.h"
+#include "features/marker_pose.h"
+#include "room_map/bundle_adjustment.h"
+#include "room_map/keypoints.h"
+#include "room_map/room_map.h"
+#include "sensor/case_config.h"
+#include "sensor/sequence.h"
+
+namespace arpos {
+
+/// An oriented box in the room; landmarks inside it are left out of the map.
+struct ExclusionBox {
+  Rigid3d room_from_box;
+  Eigen::Vector3d half_extent_m = Eigen::Vector3d::Zero();
+  bool Contains(const Eigen::Vector3d& point_in_room) const {
+    const Eigen::Vector3d p = room_from_box.Inverse() * point_in_room;
+    return (p.cwiseAbs() - half_extent_m).maxCoeff() <= 0;
+  }
+};
+
+/// The couch top and everything on it move during positioning: a box about
+/// the treatment isocentre, in the reference-model frame at its target pose
+/// (patient axes as DICOM LPS: x left, y posterior, z superior). Defaults:
+/// 0.45 m either side, from 0.6 m anterior to 0.3 m posterior (below the
+/// couch top), 1.4 m head- and footwards.
+ExclusionBox CouchExclusionBox(const Rigid3d& room_from_model_target,
+                               double half_width_m = 0.45, double anterior_m = 0.6,
+                               double posterior_m = 0.3, double half_length_m = 1.4);
+
+struct RoomMapBuildOptions {
+  /// Room-marker detection; dictionary and id range are taken from the case
+  /// by MakeRoomMapBuildOptions.
+  MarkerDetectorOptions detector;
+  MarkerPoseOptions marker_pose;
+  KeypointOptions keypoints;
+  BaOptions bundle_adjustment;
+
+  /// Map grey values through the inverse sRGB curve before marker detection
+  /// (camera_response.h); off only for cameras with a linear response.
+  bool linearize_srgb = true;
+  int frame_step = 1;   ///< use every n-th frame
+  int max_frames = 0;   ///< 0 = all
+  int threads = 2;      ///< frame processing and Ceres
+
+  /// Corner noise floor (px): the edge fits' own sigma is used when larger.
+  double marker_corner_sigma_px = 0.1;
+  /// Only markers whose corners refined fully (MarkerStatus::kRefined) are
+  /// used; single-view poses must also pass this reprojection RMS (px).
+  double max_marker_view_rms_px = 2.0;
+  /// Depth samples kept per marker view for the plane term and scale check.
+  int marker_depth_samples = 16;
+
+  bool use_keypoints = true;
+  double keypoint_sigma_px = 0.7;
+  /// Association: a keypoint joins a landmark projected within this radius,
+  /// with a descriptor within this Hamming distance, and a back-projected
+  /// point within max(3 sigma(z), association_min_distance_m).
+  double association_radius_px = 4.0;
+  int max_hamming = 50;
+  double association_min_distance_m = 0.01;
+  int min_landmark_observations = 3;
+  int max_landmarks = 4000;
+  /// Landmarks are thinned over a voxel grid of this size for spread.
+  double landmark_voxel_m = 0.1;
+  std::vector<ExclusionBox> exclude_landmarks;
+
+  /// Observations with a reprojection error above this many sigmas after the
+  /// first joint adjustment are dropped before the second.
+  double outlier_sigmas = 4.0;
+
+  std::string Validate() const;
+  bool Check(std::string* reason = nullptr) const;
+};
+
+/// Options for a case: dictionary, room id range and intrinsics from `config`.
+RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseConfig& config);
+
+struct RoomMapBuildReport {
+  int frames_total = 0;
+  int frames_used = 0;          ///< frames with a camera pose in the final adjustment
+  int frames_with_markers = 0;  ///< frames seeing at least one usable room marker
+  int frames_posed_by_keypoints = 0;
+  int marker_views = 0;
+  int ambiguous_marker_views = 0;  ///< single-view poses rejected (ambiguous / depth mismatch)
+  std::vector<int> unconnected_markers;  ///< seen but not linked to the origin: not in the map
+  int landmark_candidates = 0;
+  int landmarks_excluded = 0;   ///< inside an exclusion box
+  int landmarks = 0;
+  int keypoint_observations = 0;
+  double marker_rms_px = 0;     ///< over all marker corner observations
+  double keypoint_rms_px = 0;   ///< over kept keypoint observations
+  double keypoint_depth_rms_m = 0;
+  /// Median over marker views of measured depth / map-predicted depth
+  /// inside the marker (1.000 = consistent scale), and its robust spread.
+  double depth_scale_ratio = 0;
+  double depth_scale_ratio_mad = 0;
+  BaSummary marker_adjustment;
+  BaSummary joint_adjustment;
+  double frames_s = 0, initialisation_s = 0, landmarks_s = 0, adjustment_s = 0, total_s = 0;
+  std::vector<std::string> warnings;
+  /// Camera poses of the used frames (sequence index, room_from_camera).
+  std::vector<std::pair<int, Rigid3d>> room_from_camera;
+
+  std::string ToText() const;
+};
+
+struct RoomMapBuildResult {
+  RoomMap map;
+  RoomMapBuildReport report;
+};
+
+/// Builds the map of `sequence` (the room/ folder of a case with `config`).
+/// Throws InputError naming the file for unreadable frames, and when the
+/// origin marker is never seen (the room frame would be undefined) or no
+/// usable marker is found; Cancelled if `callbacks.cancel_requested` says so.
+RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& config,
+                                const RoomMapBuildOptions& options,
+                                const ControllerCallbacks& callbacks = {});
+
+}  // namespace arpos
