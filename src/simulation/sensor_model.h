@@ -1,0 +1,79 @@
+#pragma once
+/// Camera models of the simulator: what turns an exact render into the
+/// images an RGB-D camera delivers.
+///
+/// Colour: linear radiance -> (optional motion blur) -> optical blur
+/// (Gaussian) -> exposure and vignetting -> shot + read noise in linear units
+/// -> sRGB gamma -> 8-bit BGR.
+/// Depth (registered to colour): exact centre-sample z -> noise growing with
+/// distance (white + spatially correlated) -> dropouts (random, grazing
+/// angles, depth discontinuities, projector shadows for structured light,
+/// range limits) -> quantisation to the depth scale.
+///
+/// Randomness is a pure function of (seed, frame key, pixel): see random.h.
+
+#include <cstdint>
+#include <functional>
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "sensor/intrinsics.h"
+#include "simulation/rasterizer.h"
+
+namespace arpos::sim {
+
+struct SensorProfile {
+  std::string name;                ///< "xtion" or "l515"
+  CameraIntrinsics intrinsics;
+  int supersampling = 3;           ///< rasteriser samples per pixel axis
+  // Colour.
+  double blur_sigma_px = 0.7;      ///< optical blur (Gaussian sigma)
+  double exposure = 1.0;           ///< linear radiance -> [0, 1] sensor value
+  double vignetting = 0.2;         ///< relative fall-off at the image corner
+  double read_noise = 0.8;         ///< sigma, linear 8-bit units
+  double shot_noise_gain = 0.06;   ///< variance per linear 8-bit unit
+  double exposure_time_s = 0.016;  ///< motion blur window (--hard)
+  // Depth.
+  double depth_sigma_const_m = 0;      ///< sigma(z) = const + quad * z^2
+  double depth_sigma_quad_per_m = 0;
+  double depth_correlated_fraction = 0.3;  ///< share of sigma that is smooth
+  double depth_correlation_px = 8;     ///< size of the smooth component's cells
+  double min_range_m = 0.4, max_range_m = 4.0;
+  double grazing_start_deg = 70, grazing_end_deg = 85;  ///< dropout ramps to 1
+  double edge_relative_jump = 0.03;    ///< neighbour depth jump that counts as an edge
+  double edge_dropout = 0.6;           ///< probability at an edge pixel
+  double random_dropout = 0.003;
+  double projector_baseline_m = 0;     ///< structured light: shadow band, 0 = none
+
+  std::string Describe() const;  ///< one line for logs and simulation.yaml
+};
+
+/// "xtion" (640x480 structured light, depth_scale 5000) or "l515"
+/// (1280x720 colour, registered LiDAR depth, depth_scale 4000). Throws
+/// InputError for another name.
+SensorProfile MakeSensorProfile(const std::string& name);
+
+/// Linear radiance (CV_32FC3 RGB) -> 8-bit BGR as the camera delivers it.
+/// With `noise` false: no blur, no noise, no vignetting (exact render,
+/// gamma-encoded). `frame_key` identifies the frame for the noise.
+cv::Mat SimulateColor(const cv::Mat& radiance, const SensorProfile& profile, bool noise,
+                      uint64_t frame_key);
+
+/// Exact depth (CV_32F metres, 0 = none) and normals -> 16-bit depth PNG
+/// values. With `noise` false: only range limits and rounding to the depth
+/// scale.
+cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, bool noise,
+                      uint64_t frame_key);
+
+/// Motion blur along the actual image motion. For each pixel, the point seen
+/// at its centre (depth, label) moves rigidly with its object: `motion(label,
+/// dt)` returns camera(t + dt) <- camera(t) for points of that label (the
+/// camera's own motion composed with the object's). The radiance is averaged
+/// along the resulting image path over [-exposure/2, +exposure/2] (`taps`
+/// samples). Pixels without depth keep their value.
+using LabelMotion = std::function<Rigid3d(int label, double dt_s)>;
+cv::Mat ApplyMotionBlur(const cv::Mat& radiance, const RenderOutput& render,
+                        const CameraIntrinsics& intrinsics, double exposure_s,
+                        const LabelMotion& motion, int max_label, int taps = 9);
+
+}  // namespace arpos::sim
