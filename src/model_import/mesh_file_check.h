@@ -1,0 +1,25 @@
+#pragma once
+/// Structural validation of PLY, OFF and binary STL files before assimp
+/// reads them.
+///
+/// Why: assimp 5.2.5 (Debian 12) crashes or returns garbage on hostile
+/// files, measured: a binary PLY cut short segfaults inside
+/// aiProcess_JoinIdenticalVertices; an OFF file with fewer faces than its
+/// header declares aborts the process; an ASCII PLY with a missing face, or an
+/// OFF face index beyond the vertex count, is accepted with invented faces.
+/// This check walks the file against its own header (counts, sizes, face
+/// indices) without building a mesh, so such files are refused with a clear
+/// message instead. Other extensions pass unchecked (assimp's OBJ and STL
+/// readers refuse those cases themselves).
+
+#include <filesystem>
+
+namespace arpos {
+
+/// Throws InputError naming `path` if a .ply, .off or binary .stl file is
+/// malformed: unknown header, counts larger than the file can hold, data
+/// shorter than declared, face indices out of range, non-numbers. Returns
+/// silently for a sound file or another extension.
+void CheckMeshFileStructure(const std::filesystem::path& path);
+
+}  // namespace arpos
