@@ -114,28 +114,29 @@ TrunkReference MeasureTrunk(const CtVolume& ct) {
   return ref;
 }
 
+// Read and imported once per process, and only by the tests that need them
+// (ctest runs every test in its own process).
 class RealCt : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    ct_ = new CtVolume(ReadCtSeries(CtSeriesDir()));
-    const auto start = std::chrono::steady_clock::now();
-    result_ = new ModelImportResult(ImportModel(CtSeriesDir(), {}));
-    import_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  static const CtVolume& Ct() {
+    static const CtVolume ct = ReadCtSeries(CtSeriesDir());
+    return ct;
   }
-  static void TearDownTestSuite() {
-    delete ct_;
-    delete result_;
+  static const ModelImportResult& Model() {
+    static const ModelImportResult model = [] {
+      const auto start = std::chrono::steady_clock::now();
+      ModelImportResult result = ImportModel(CtSeriesDir(), {});
+      import_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      return result;
+    }();
+    return model;
   }
-  static CtVolume* ct_;
-  static ModelImportResult* result_;
   static double import_s_;
 };
-CtVolume* RealCt::ct_ = nullptr;
-ModelImportResult* RealCt::result_ = nullptr;
 double RealCt::import_s_ = 0;
 
 TEST_F(RealCt, SeriesIsSortedByPositionWithHounsfieldUnits) {
-  const VolumeGeometry& g = ct_->geometry;
+  const VolumeGeometry& g = Ct().geometry;
   EXPECT_EQ(g.size[0], 512);
   EXPECT_EQ(g.size[1], 512);
   EXPECT_EQ(g.size[2], 20);
@@ -145,17 +146,17 @@ TEST_F(RealCt, SeriesIsSortedByPositionWithHounsfieldUnits) {
   EXPECT_TRUE(g.patient_from_index_rotation.isIdentity(1e-9));
   EXPECT_LT((g.origin_mm - Eigen::Vector3d(-249.51171875, -437.51171875, -804.5)).norm(), 1e-6);
   // Slice order follows ImagePositionPatient: the file ...16573 is at z = -766.5, the top.
-  EXPECT_EQ(ct_->files.back().filename().string(), "CT.1.3.12.2.1107.5.1.4.60064.30000022120808113428000016573");
+  EXPECT_EQ(Ct().files.back().filename().string(), "CT.1.3.12.2.1107.5.1.4.60064.30000022120808113428000016573");
   // That file stores 0..2460 with intercept -1024 (its header's smallest/largest pixel values).
   const size_t slice = 512 * 512;
-  const auto [lo, hi] = std::minmax_element(ct_->hu.end() - slice, ct_->hu.end());
+  const auto [lo, hi] = std::minmax_element(Ct().hu.end() - slice, Ct().hu.end());
   EXPECT_EQ(*lo, -1024);
   EXPECT_EQ(*hi, 2460 - 1024);
   // Air in the corner and soft tissue in the middle.
-  EXPECT_LT(ct_->hu[g.Index(5, 5, 10)], -900);
-  EXPECT_GT(ct_->hu[g.Index(256, 256, 10)], -200);
-  EXPECT_TRUE(ct_->series_instance_uid.empty());  // anonymised: no UID at all
-  EXPECT_FALSE(ct_->frame_of_reference_uid.empty());
+  EXPECT_LT(Ct().hu[g.Index(5, 5, 10)], -900);
+  EXPECT_GT(Ct().hu[g.Index(256, 256, 10)], -200);
+  EXPECT_TRUE(Ct().series_instance_uid.empty());  // anonymised: no UID at all
+  EXPECT_FALSE(Ct().frame_of_reference_uid.empty());
 }
 
 TEST_F(RealCt, SortingDoesNotDependOnFileNames) {
@@ -166,14 +167,14 @@ TEST_F(RealCt, SortingDoesNotDependOnFileNames) {
     fs::copy_file(files[i], dir.path() / ("IMG" + std::to_string(100 - i) + ".dcm"));
   }
   const CtVolume copy = ReadCtSeries(dir.path());
-  EXPECT_EQ(copy.hu, ct_->hu);
-  EXPECT_LT((copy.geometry.origin_mm - ct_->geometry.origin_mm).norm(), 1e-9);
+  EXPECT_EQ(copy.hu, Ct().hu);
+  EXPECT_LT((copy.geometry.origin_mm - Ct().geometry.origin_mm).norm(), 1e-9);
 }
 
 TEST_F(RealCt, BodySurfaceMatchesTheTrunkAndExcludesCouchAndArms) {
-  const ModelImportResult& r = *result_;
+  const ModelImportResult& r = Model();
   const MeshSummary& s = r.summary;
-  const TrunkReference ref = MeasureTrunk(*ct_);
+  const TrunkReference ref = MeasureTrunk(Ct());
   std::printf("[ measure  ] CT import %.2f s (read %.2f, segment %.2f, surface %.2f); %d vertices "
               "(%d extracted), %d faces, extent %.1f x %.1f x %.1f mm, closed %d, %d components\n",
               import_s_, r.read_s, r.segment_s, r.surface_s, s.num_vertices,
@@ -199,7 +200,7 @@ TEST_F(RealCt, BodySurfaceMatchesTheTrunkAndExcludesCouchAndArms) {
   EXPECT_EQ(behind, 0);
   // Cross-sections at slice positions match the trunk's area within 1.5 %.
   for (int k : {3, 10, 16}) {
-    const double z_m = ct_->geometry.PatientFromIndexMm(Eigen::Vector3d(0, 0, k)).z() * 0.001;
+    const double z_m = Ct().geometry.PatientFromIndexMm(Eigen::Vector3d(0, 0, k)).z() * 0.001;
     const double area_mm2 = test::CrossSectionAreaZ(r.mesh, z_m) * 1e6;
     EXPECT_NEAR(area_mm2, ref.area_mm2[k], 0.015 * ref.area_mm2[k]) << "slice " << k;
   }

@@ -26,38 +26,39 @@ std::string ImportErrorMessage(const fs::path& input, const ModelImportOptions& 
   return "(no error)";
 }
 
+// Parsed and imported once per process, and only by the tests that need them
+// (ctest runs every test in its own process).
 class RealRtStruct : public ::testing::Test {
  protected:
-  static void SetUpTestSuite() {
-    structure_set_ = new RtStructureSet(ReadRtStruct(RtStructFile()));
-    const auto start = std::chrono::steady_clock::now();
-    ModelImportOptions options;
-    options.rtplan_path = RtPlanFile();  // read to report the isocentre; origin stays
-    result_ = new ModelImportResult(ImportModel(RtStructFile(), options));
-    import_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  static const RtStructureSet& StructureSet() {
+    static const RtStructureSet structure_set = ReadRtStruct(RtStructFile());
+    return structure_set;
   }
-  static void TearDownTestSuite() {
-    delete structure_set_;
-    delete result_;
+  static const ModelImportResult& Model() {
+    static const ModelImportResult model = [] {
+      const auto start = std::chrono::steady_clock::now();
+      ModelImportOptions options;
+      options.rtplan_path = RtPlanFile();  // read to report the isocentre; origin stays
+      ModelImportResult result = ImportModel(RtStructFile(), options);
+      import_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      return result;
+    }();
+    return model;
   }
   static const RtRoi& Body() {
-    for (const auto& roi : structure_set_->rois) {
+    for (const auto& roi : StructureSet().rois) {
       if (roi.name == "BODY") return roi;
     }
     throw std::runtime_error("no BODY");
   }
-  static RtStructureSet* structure_set_;
-  static ModelImportResult* result_;
   static double import_s_;
 };
-RtStructureSet* RealRtStruct::structure_set_ = nullptr;
-ModelImportResult* RealRtStruct::result_ = nullptr;
 double RealRtStruct::import_s_ = 0;
 
 TEST_F(RealRtStruct, ParsesRoisAndContours) {
   // SOURCE.txt: ROI 1 "BODY" (EXTERNAL): 141 closed planar contours on 98 slices, z -122.4..168.6.
-  EXPECT_EQ(structure_set_->label, "CT_1");
-  EXPECT_FALSE(structure_set_->frame_of_reference_uid.empty());
+  EXPECT_EQ(StructureSet().label, "CT_1");
+  EXPECT_FALSE(StructureSet().frame_of_reference_uid.empty());
   const RtRoi& body = Body();
   EXPECT_EQ(body.number, 1);
   EXPECT_EQ(body.interpreted_type, "EXTERNAL");
@@ -72,12 +73,12 @@ TEST_F(RealRtStruct, ParsesRoisAndContours) {
   }
   EXPECT_NEAR(zmin, -122.44, 0.01);
   EXPECT_NEAR(zmax, 168.56, 0.01);
-  EXPECT_EQ(SelectBodyRoi(*structure_set_, "", RtStructFile()), 0u);
-  EXPECT_EQ(structure_set_->rois[SelectBodyRoi(*structure_set_, "heart", RtStructFile())].name, "Heart");
+  EXPECT_EQ(SelectBodyRoi(StructureSet(), "", RtStructFile()), 0u);
+  EXPECT_EQ(StructureSet().rois[SelectBodyRoi(StructureSet(), "heart", RtStructFile())].name, "Heart");
 }
 
 TEST_F(RealRtStruct, BodySurfaceIsClosedAndItsCrossSectionsMatchTheContours) {
-  const ModelImportResult& r = *result_;
+  const ModelImportResult& r = Model();
   const MeshSummary& s = r.summary;
   std::printf("[ measure  ] RTSTRUCT import %.2f s (read %.2f, raster %.2f, surface %.2f); %d vertices "
               "(%d extracted), %d faces, extent %.1f x %.1f x %.1f mm, closed %d, %d components\n",
@@ -119,7 +120,7 @@ TEST_F(RealRtStruct, BodySurfaceIsClosedAndItsCrossSectionsMatchTheContours) {
 
 TEST_F(RealRtStruct, IsocentreOriginShiftsTheModel) {
   const RtPlanIsocentre plan = ReadRtPlanIsocentre(RtPlanFile());
-  EXPECT_EQ(plan.frame_of_reference_uid, structure_set_->frame_of_reference_uid);
+  EXPECT_EQ(plan.frame_of_reference_uid, StructureSet().frame_of_reference_uid);
   EXPECT_GT(plan.num_beams, 0);
   ModelImportOptions options;
   options.origin = ModelOrigin::kIsocentre;
