@@ -130,6 +130,8 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
         const double det = v[0]->p.dot(c0);
         const double scale = v[0]->p.norm() * v[1]->p.norm() * v[2]->p.norm();
         if (!(std::abs(det) > 1e-12 * scale)) continue;  // edge-on or degenerate
+        // det = p0 . n: positive when the counter-clockwise side faces away.
+        if (mesh.cull_back_faces && det > 0) continue;
         const double sgn = det > 0 ? 1.0 : -1.0;
         RasterTri rt;
         const Eigen::Vector3d* cs[3] = {&c0, &c1, &c2};
@@ -238,11 +240,12 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
           }
         }
       }
-      // Shading and resolve. A pixel whose samples all hit one triangle with
-      // a smooth (bilinear) texture is shaded once at its centre: its
-      // texture is already band-limited and the samples would agree up to
-      // texture detail. Pixels on silhouettes or with nearest-sampled
-      // artwork (markers) are shaded per sample, which keeps edges exact.
+      // Shading and resolve. A pixel whose samples all hit one mesh with a
+      // smooth (bilinear) texture or vertex colours and no depth step is
+      // shaded once at its centre: its texture is already band-limited and
+      // the samples would agree up to texture detail. Pixels on silhouettes
+      // or with nearest-sampled artwork (markers) are shaded per sample,
+      // which keeps those edges exact.
       for (int row = row0; row < row1; ++row) {
         auto* color_row = out.color.ptr<cv::Vec3f>(row);
         auto* depth_row = out.depth.ptr<float>(row);
@@ -253,9 +256,20 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
           normal_row[col] = cv::Vec3f(0, 0, 0);
           label_row[col] = 0;
           const size_t base = (static_cast<size_t>(row - row0) * W + col) * N;
+          // Uniform: every sample on the same smooth-textured mesh with no
+          // depth step (no silhouette inside the pixel).
           const int centre_id = ids[base + centre];
           bool uniform = centre_id >= 0 && !prepared[tris[centre_id].instance].nearest;
-          for (int k = 0; k < N && uniform; ++k) uniform = ids[base + k] == centre_id;
+          if (uniform) {
+            const int instance = tris[centre_id].instance;
+            const float zc = zbuf[base + centre], tolerance = 0.01f * zc;
+            for (int k = 0; k < N && uniform; ++k) {
+              const int id = ids[base + k];
+              uniform = id == centre_id ||
+                        (id >= 0 && tris[id].instance == instance &&
+                         std::abs(zbuf[base + k] - zc) < tolerance);
+            }
+          }
           Eigen::Vector3f sum = Eigen::Vector3f::Zero();
           int cached_tri = -2;
           Eigen::Vector3f cached_irradiance = Eigen::Vector3f::Zero();

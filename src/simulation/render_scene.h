@@ -60,6 +60,9 @@ struct RenderMesh {
   std::vector<Eigen::Vector3f> colors;  ///< linear albedo per vertex or empty
   std::vector<Eigen::Vector3i> faces;
   int material = 0;
+  /// Skip faces seen from behind (counter-clockwise = front). Only for
+  /// closed meshes, whose back faces are always hidden.
+  bool cull_back_faces = false;
 
   /// Appends an axis-free quad p0..p3 (counter-clockwise seen from the front)
   /// with uv (0,0),(1,0),(1,1),(0,1) at p0..p3 unless `uv` is given,

@@ -53,7 +53,7 @@ SensorProfile MakeSensorProfile(const std::string& name) {
     p.intrinsics.fx = p.intrinsics.fy = 540.0;
     p.intrinsics.cx = 319.5;
     p.intrinsics.cy = 239.5;
-    p.intrinsics.depth_scale = 5000;
+    p.intrinsics.depth_scale = 1000;  // OpenNI millimetres (finer than the noise)
     p.blur_sigma_px = 0.7;
     p.vignetting = 0.25;
     p.read_noise = 1.0;

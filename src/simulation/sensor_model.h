@@ -48,7 +48,7 @@ struct SensorProfile {
   std::string Describe() const;  ///< one line for logs and simulation.yaml
 };
 
-/// "xtion" (640x480 structured light, depth_scale 5000) or "l515"
+/// "xtion" (640x480 structured light, depth_scale 1000) or "l515"
 /// (1280x720 colour, registered LiDAR depth, depth_scale 4000). Throws
 /// InputError for another name.
 SensorProfile MakeSensorProfile(const std::string& name);

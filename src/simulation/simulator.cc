@@ -282,11 +282,14 @@ SimulatedFrame Simulator::RenderScene(const Scene& scene, bool noise, uint64_t f
   const Rigid3d camera_from_room = scene.room_from_camera.Inverse();
   std::vector<RenderInstance> instances;
   for (int mesh : world_.room_meshes) instances.push_back({mesh, camera_from_room, kLabelRoom});
+  // The couch top moves with the patient; without one it is at home.
+  const Rigid3d camera_from_couch =
+      camera_from_room * scene.room_from_model.value_or(world_.room_from_model_target);
+  for (int mesh : world_.couch_top_meshes) {
+    instances.push_back({mesh, camera_from_couch, kLabelCouchTop});
+  }
   if (scene.room_from_model) {
     const Rigid3d camera_from_model = camera_from_room * *scene.room_from_model;
-    for (int mesh : world_.couch_top_meshes) {
-      instances.push_back({mesh, camera_from_model, kLabelCouchTop});
-    }
     instances.push_back({world_.body_mesh, camera_from_model, kLabelBody});
     for (size_t i = 0; i < world_.sticker_meshes.size(); ++i) {
       if (scene.sticker_on.empty() || scene.sticker_on[i]) {

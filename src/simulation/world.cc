@@ -376,6 +376,7 @@ World BuildWorld(const WorldOptions& options) {
       mesh.colors.push_back(c * (1.0f + n));
     }
     mesh.material = AddMaterial(&scene, -1, Eigen::Vector3f(1, 1, 1), true);
+    mesh.cull_back_faces = body.IsClosed();
     world.body_mesh = AddMesh(&scene, std::move(mesh));
   }
 
