@@ -343,6 +343,70 @@ TEST_F(BrokenSeries, EmptyNonDicomAndCorruptFoldersAreRefused) {
   EXPECT_NE(truncated.find(victim.filename().string()), std::string::npos) << truncated;
 }
 
+// A synthetic CT where the couch top touches the patient's back over its
+// whole width: only the opening separates them (the real series has a gap).
+TEST(BodyMask, CouchTouchingTheBackIsCutOffAndLungsFilled) {
+  CtVolume ct;
+  VolumeGeometry& g = ct.geometry;
+  g.size = {200, 170, 8};
+  g.spacing_mm = Eigen::Vector3d(1, 1, 3);
+  g.origin_mm = Eigen::Vector3d(-100, -70, 0);
+  ct.hu.assign(g.num_voxels(), -1000);
+  auto inside_ellipse = [](int i, int j, double ci, double cj, double ri, double rj) {
+    const double x = (i - ci) / ri, y = (j - cj) / rj;
+    return x * x + y * y <= 1.0;
+  };
+  for (int k = 0; k < g.size[2]; ++k) {
+    for (int j = 0; j < g.size[1]; ++j) {
+      for (int i = 0; i < g.size[0]; ++i) {
+        int16_t& hu = ct.hu[g.Index(i, j, k)];
+        if (inside_ellipse(i, j, 100, 70, 80, 50)) hu = 20;                  // trunk, back at j = 120
+        if (inside_ellipse(i, j, 70, 65, 20, 25) || inside_ellipse(i, j, 130, 65, 20, 25)) hu = -800;  // lungs
+        if (j >= 120 && j <= 122) hu = 300;                                  // 3 mm couch top, full width
+        if (j >= 150 && j <= 152) hu = 300;                                  // couch bottom shell
+      }
+    }
+  }
+  BodyMaskOptions no_opening;
+  no_opening.opening_radius_mm = 0;
+  const BodyMask joined = SegmentBody(ct, no_opening, "synthetic");
+  EXPECT_TRUE(joined.inside[g.Index(5, 121, 4)]) << "without the opening the couch top is part of the body";
+
+  const BodyMask mask = SegmentBody(ct, BodyMaskOptions(), "synthetic");
+  EXPECT_FALSE(mask.inside[g.Index(5, 121, 4)]);      // couch away from the body
+  EXPECT_FALSE(mask.inside[g.Index(100, 151, 4)]);    // couch bottom
+  EXPECT_TRUE(mask.inside[g.Index(70, 65, 4)]);       // lung filled
+  EXPECT_TRUE(mask.inside[g.Index(100, 118, 4)]);     // back
+  size_t couch_rows = 0, below = 0;
+  for (int i = 0; i < g.size[0]; ++i) {
+    for (int j = 120; j <= 122; ++j) couch_rows += mask.inside[g.Index(i, j, 4)];
+    for (int j = 123; j < g.size[1]; ++j) below += mask.inside[g.Index(i, j, 4)];
+  }
+  EXPECT_EQ(below, 0u);
+  EXPECT_LT(couch_rows, 120u);  // a fillet where the back meets the couch, not the 600-pixel couch top
+  size_t slice_voxels = 0;
+  for (int j = 0; j < g.size[1]; ++j) {
+    for (int i = 0; i < g.size[0]; ++i) slice_voxels += mask.inside[g.Index(i, j, 4)];
+  }
+  EXPECT_NEAR(static_cast<double>(slice_voxels), M_PI * 80 * 50, 0.02 * M_PI * 80 * 50);
+
+  double iso = 0;
+  SurfaceOptions options;
+  const ScalarVolume field = BodySurfaceField(ct, mask, -350, &iso);
+  options.iso_value = iso;
+  const MeshSummary s = SummarizeMesh(ExtractSurface(field, options, "synthetic"));
+  EXPECT_TRUE(s.closed);
+  EXPECT_EQ(s.num_components, 1);
+  EXPECT_NEAR(s.min.x() * 1000, -80, 1.0);
+  EXPECT_NEAR(s.max.x() * 1000, 80, 1.0);
+  EXPECT_NEAR(s.min.y() * 1000, -50, 1.0);
+  // The back plus the contact fillet at most, never the shell at 80 mm; the
+  // couch top (50-53 mm) would also widen x to +-100 mm (checked above).
+  EXPECT_LT(s.max.y() * 1000, 53.5);
+  EXPECT_NEAR(s.min.z() * 1000, -1.5, 0.5);  // caps half a slice beyond the end slices
+  EXPECT_NEAR(s.max.z() * 1000, 22.5, 0.5);
+}
+
 TEST(ModelSource, DetectionAndRefusals) {
   TempDir dir;
   EXPECT_EQ(DetectModelSource(CtSeriesDir()), ModelSourceKind::kCtSeries);
