@@ -218,6 +218,7 @@ RegistrationResult Optimize(const Factor& factor, const PointCloud& source, cons
   }
   std::vector<int64_t> correspondences;
   Rigid3d pose = initial;
+  std::vector<Rigid3d> recent;  // poses before the last (up to) four updates
   double lambda = options.lm_initial_lambda;
   for (int iteration = 1; iteration <= options.max_iterations; ++iteration) {
     const Accumulator lin = Linearize(factor, source, tree, pose, options, &correspondences);
@@ -232,6 +233,8 @@ RegistrationResult Optimize(const Factor& factor, const PointCloud& source, cons
       result.message = "too few correspondences (" + std::to_string(lin.inliers) + ")";
       return result;
     }
+    recent.push_back(pose);
+    if (recent.size() > 4) recent.erase(recent.begin());
     Vector6d delta;
     if (!options.levenberg_marquardt) {
       delta = SolveDamped(lin.h, lin.b, 0.0);
@@ -270,6 +273,24 @@ RegistrationResult Optimize(const Factor& factor, const PointCloud& source, cons
       result.converged = true;
       result.message = "converged after " + std::to_string(iteration) + " iterations";
       return result;
+    }
+    // On sparse clouds correspondences can flip back and forth, so the pose
+    // cycles through a few states a few tolerances apart and the step test
+    // never passes. Back within tolerance of a pose 2-4 steps ago, with small
+    // steps: the optimum lies within the cycle; call it converged.
+    if (delta.head<3>().norm() < 10 * options.rotation_tolerance_rad &&
+        delta.tail<3>().norm() < 10 * options.translation_tolerance_m) {
+      for (size_t k = 0; k + 1 < recent.size(); ++k) {  // recent.back() is pose_before
+        const Rigid3d back = recent[k].Inverse() * pose;
+        if (RotationAngleRad(back.rotation) < options.rotation_tolerance_rad &&
+            back.translation.norm() < options.translation_tolerance_m) {
+          result.target_from_source = pose;
+          result.converged = true;
+          result.message = "converged after " + std::to_string(iteration) +
+                           " iterations (cycling between correspondence sets)";
+          return result;
+        }
+      }
     }
   }
   result.target_from_source = pose;

@@ -52,7 +52,7 @@ const GlobalRegistrationModel& BodyModel() {
   return *model;
 }
 
-TEST(GlobalRegistration, FindsTheBodyFromArbitraryPlacements) {
+TEST(GlobalRegistration, FindsTheBodyFromArbitraryPlacementsDeterministically) {
   for (uint64_t seed : {11, 12, 13}) {
     const View view = MakeView(testing::BodyMesh(), seed);
     GlobalRegistrationOptions options;
@@ -64,19 +64,14 @@ TEST(GlobalRegistration, FindsTheBodyFromArbitraryPlacements) {
         << seed;
     EXPECT_GT(r.fitness, 0.9);
     EXPECT_GT(r.conditioning.min_max_ratio, options.min_conditioning);
+    if (seed == 11) {
+      // The same answer, bit for bit, on one thread.
+      options.num_threads = 1;
+      const GlobalRegistrationResult one = AlignGlobal(BodyModel(), view.scene, options);
+      EXPECT_EQ(one.status, r.status);
+      EXPECT_EQ(one.target_from_source.ToMatrix(), r.target_from_source.ToMatrix());
+    }
   }
-}
-
-TEST(GlobalRegistration, IsDeterministicForAnyThreadCount) {
-  const View view = MakeView(testing::BodyMesh(), 21);
-  GlobalRegistrationOptions options;
-  options.ransac_iterations = 5000;
-  options.num_threads = 1;
-  const GlobalRegistrationResult one = AlignGlobal(BodyModel(), view.scene, options);
-  options.num_threads = 2;
-  const GlobalRegistrationResult two = AlignGlobal(BodyModel(), view.scene, options);
-  EXPECT_EQ(one.status, two.status);
-  EXPECT_EQ(one.target_from_source.ToMatrix(), two.target_from_source.ToMatrix());
 }
 
 TEST(GlobalRegistration, PriorRestrictsTheSearch) {
@@ -114,7 +109,7 @@ TEST(GlobalRegistration, SphereIsAmbiguous) {
 }
 
 TEST(GlobalRegistration, CylinderIsAmbiguous) {
-  const TriangleMesh cylinder = testing::MakeCylinder(0.15, 0.8);
+  const TriangleMesh cylinder = testing::MakeCylinder(0.12, 0.5);
   const View view = MakeView(cylinder, 51);
   const GlobalRegistrationResult r =
       AlignGlobal(SampleMeshSurface(cylinder, 0.006, 3), view.scene, GlobalRegistrationOptions());
@@ -133,12 +128,16 @@ TEST(GlobalRegistration, RejectsBadOptions) {
   GlobalRegistrationOptions bad;
   bad.feature_radius_m = bad.voxel_m / 2;
   EXPECT_FALSE(bad.Validate().empty());
-  EXPECT_THROW(AlignGlobal(BodyModel(), PointCloud(), bad), Error);
+  const PointCloud small = SampleMeshSurface(testing::MakeEllipsoid(Eigen::Vector3d(0.2, 0.1, 0.1)), 0.01);
+  EXPECT_THROW(AlignGlobal(small, small, bad), Error);
+  const GlobalRegistrationModel model(small, GlobalRegistrationOptions());
   GlobalRegistrationOptions other;
   other.voxel_m = 0.02;
-  EXPECT_THROW(AlignGlobal(BodyModel(), PointCloud(), other), Error);
-  const GlobalRegistrationResult empty = AlignGlobal(BodyModel(), PointCloud(), {});
+  EXPECT_FALSE(model.Matches(other));
+  EXPECT_THROW(AlignGlobal(model, small, other), Error);
+  const GlobalRegistrationResult empty = AlignGlobal(model, PointCloud(), {});
   EXPECT_EQ(empty.status, GlobalRegistrationStatus::kFailed);
+  EXPECT_FALSE(empty.reason.empty());
 }
 
 }  // namespace

@@ -1,0 +1,113 @@
+#pragma once
+/// Incremental surface reconstruction from depth clouds with known camera
+/// poses, each refined by GICP against what has been built so far.
+///
+/// Frames: every cloud is given in its camera frame with `world_from_camera`
+/// (the world is the caller's: the room for a session); the reconstruction
+/// is in the world frame. Units: metres.
+///
+/// Per offered frame (only every `frame_stride`-th is used):
+///  1. optional crops in the world frame (oriented box; keep above a plane,
+///     e.g. the couch top): the caller knows where the patient is;
+///  2. d_i = max(cbrt(V_i / N), d_0), V_i the volume of the reconstruction's
+///     axis-aligned bounding box, N = target_points, d_0 = min_voxel_m: the
+///     registration resolution grows with the reconstruction so GICP keeps
+///     about N target points;
+///  3. GICP of the frame (downsampled to d_i) against the reconstruction
+///     (downsampled to d_i) from the given pose; the corrected pose is kept
+///     only if GICP converged, fits well enough and the correction is within
+///     the limits, else the given pose is used and the report says why;
+///  4. fusion: every point is added to a voxel grid of output_voxel_m
+///     (running centroid per voxel, so the result equals voxel-downsampling
+///     the union of all placed points).
+///
+/// Thread-safety: one builder per thread (AddFrame mutates); Cloud() is
+/// const. Nothing is printed.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "geometry/rigid3.h"
+#include "registration/point_cloud.h"
+#include "registration/preprocess.h"
+#include "registration/registration.h"
+
+namespace arpos {
+
+struct ReconstructionOptions {
+  int frame_stride = 10;          ///< l: use frames 0, l, 2l, ... of those offered
+  double min_voxel_m = 0.01;      ///< d_0
+  double target_points = 5e4;     ///< N
+  double output_voxel_m = 0.01;   ///< fused result resolution
+  bool refine_poses = true;       ///< GICP against the reconstruction
+  /// GICP settings for the refinement (max_correspondence_distance_m is the
+  /// largest pose error it can pull in).
+  RegistrationOptions registration = [] {
+    RegistrationOptions r;
+    r.max_correspondence_distance_m = 0.03;
+    return r;
+  }();
+  double max_correction_m = 0.05;      ///< larger GICP corrections are refused
+  double max_correction_rad = 0.0873;  ///< 5 degrees
+  double min_fitness = 0.5;            ///< share of frame points matched
+  /// Optional crops, world frame (applied before anything else).
+  std::optional<OrientedBox> crop_box;
+  std::optional<Plane> keep_above_plane;
+  double min_height_above_plane_m = 0.01;
+  int num_threads = 0;  ///< 0 = OpenMP's default
+  std::string Validate() const;
+};
+
+struct ReconstructionFrameReport {
+  int offered_index = -1;     ///< 0-based count of AddFrame calls
+  bool used = false;          ///< false: skipped by frame_stride (nothing else filled)
+  bool refined = false;       ///< the GICP correction was applied
+  Rigid3d world_from_camera;  ///< the pose the frame was fused with
+  Rigid3d correction;         ///< world_from_camera * given^-1 (identity if not refined)
+  RegistrationResult registration;  ///< empty for the first frame or refine_poses off
+  double voxel_m = 0;         ///< d_i
+  int points_in = 0;          ///< after the crops
+  int reconstruction_points = 0;  ///< voxels after fusion
+  double seconds = 0;         ///< wall time of AddFrame
+  std::string message;        ///< why a correction was refused, etc.
+};
+
+class ReconstructionBuilder {
+ public:
+  /// Throws arpos::Error for invalid options.
+  explicit ReconstructionBuilder(const ReconstructionOptions& options = {});
+
+  /// Offers one depth cloud (camera frame) taken at `world_from_camera`.
+  ReconstructionFrameReport AddFrame(const PointCloud& cloud_in_camera,
+                                     const Rigid3d& world_from_camera);
+
+  /// The fused cloud (world frame): one centroid per occupied output voxel
+  /// seen by at least `min_points_per_voxel` points, with k-NN normals
+  /// oriented towards the cameras that saw it. Deterministic order.
+  PointCloud Cloud(int min_points_per_voxel = 1) const;
+  size_t size() const { return voxels_.size(); }
+  int frames_offered() const { return frames_offered_; }
+  int frames_used() const { return frames_used_; }
+  /// d_i the next used frame would get.
+  double CurrentVoxel() const;
+
+ private:
+  struct Voxel {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Vector3d view_sum = Eigen::Vector3d::Zero();  ///< unit vectors to the cameras
+    int count = 0;
+  };
+  PointCloud Crop(const PointCloud& cloud_in_camera, const Rigid3d& world_from_camera) const;
+  PointCloud Centroids() const;
+
+  ReconstructionOptions options_;
+  std::unordered_map<uint64_t, Voxel> voxels_;
+  Eigen::AlignedBox3d bounds_;
+  int frames_offered_ = 0;
+  int frames_used_ = 0;
+};
+
+}  // namespace arpos
