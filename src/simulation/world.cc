@@ -159,6 +159,61 @@ TriangleMesh LoadBody(const std::filesystem::path& path, Eigen::Vector3d* iso_in
     v.x() = pivot.x() + r.x();
     v.y() = pivot.y() + r.y();
   }
+  // The A-pose also holds the hands ~0.3 m in front of the body; swing each
+  // arm back about the shoulder (rotation about x, same weights) until the
+  // hand's centre is 5 cm in front of the back, so that a supine patient's
+  // arms rest by the sides instead of floating above the lap.
+  {
+    double back_z = 1e9, shoulder_z = 0;
+    int shoulder_count = 0;
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      const Eigen::Vector3f& v = mesh.vertices[i];
+      if ((*arm_weight)[i] == 0 && std::abs(v.x()) < 0.15f && v.y() > 0.0f && v.y() < 0.2f) {
+        back_z = std::min<double>(back_z, v.z());
+      }
+      if (std::abs(std::abs(v.x()) - 0.19f) < 0.02f && std::abs(v.y() - 0.5f) < 0.02f) {
+        shoulder_z += v.z();
+        ++shoulder_count;
+      }
+    }
+    shoulder_z = shoulder_count > 0 ? shoulder_z / shoulder_count : 0.0;
+    Eigen::Vector2d hand = Eigen::Vector2d::Zero();  // (y, z) of the hands' centre
+    int hand_count = 0;
+    for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+      if ((*arm_weight)[i] >= 1.0f && mesh.vertices[i].y() < 0.15f) {
+        hand += Eigen::Vector2d(mesh.vertices[i].y(), mesh.vertices[i].z());
+        ++hand_count;
+      }
+    }
+    if (hand_count > 0 && back_z < 1e8) {
+      hand /= hand_count;
+      const Eigen::Vector2d pivot(0.50, shoulder_z);
+      const Eigen::Vector2d d = hand - pivot;
+      const double target_z = back_z + 0.12;
+      // Rotation by phi maps (dy, dz) to (cos dy - sin dz, sin dy + cos dz):
+      // search the smallest swing that brings the hand to the target depth.
+      double phi = 0, best = 1e9;
+      for (int k = -180; k <= 180; ++k) {
+        const double a = RadFromDeg(0.25 * k);
+        const double y = std::cos(a) * d.x() - std::sin(a) * d.y();
+        const double z = std::sin(a) * d.x() + std::cos(a) * d.y();
+        const double cost = std::abs(pivot.y() + z - target_z) + (y > -0.2 ? 1.0 : 0.0);
+        if (cost < best - 1e-12) {
+          best = cost;
+          phi = a;
+        }
+      }
+      for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+        const float w = (*arm_weight)[i];
+        if (w <= 0) continue;
+        Eigen::Vector3f& v = mesh.vertices[i];
+        const double a = phi * w;
+        const double dy = v.y() - pivot.x(), dz = v.z() - pivot.y();
+        v.y() = static_cast<float>(pivot.x() + std::cos(a) * dy - std::sin(a) * dz);
+        v.z() = static_cast<float>(pivot.y() + std::sin(a) * dy + std::cos(a) * dz);
+      }
+    }
+  }
   Eigen::Vector3f lo, hi;
   mesh.Bounds(&lo, &hi);
   // Isocentre: upper abdomen, midline, halfway between front and back.
