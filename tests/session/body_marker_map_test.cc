@@ -1,0 +1,108 @@
+// Body marker map on simulated body scans with exact ground truth.
+#include <gtest/gtest.h>
+
+#include "body_model/body_marker_map.h"
+#include "geometry/pose_error.h"
+#include "simulation/simulator.h"
+
+namespace arpos {
+namespace {
+
+struct Scan {
+  std::vector<BodyScanView> views;
+  CameraIntrinsics intrinsics;
+  Rigid3d room_from_model;
+  sim::SimulationTruth truth;
+};
+
+// Renders `frames` body-scan frames and builds views with the true camera poses.
+Scan RenderScan(const std::string& profile, int frames, uint64_t seed) {
+  sim::SimulationOptions options;
+  options.profile = profile;
+  options.seed = seed;
+  options.room_frames = 1;
+  options.body_scan_frames = frames;
+  options.tracking_frames = 1;
+  options.tracking_sequences = 1;
+  const sim::Simulator simulator(options);
+  Scan scan;
+  scan.truth = simulator.Truth();
+  scan.intrinsics = simulator.profile().intrinsics;
+  int body_index = -1;
+  for (size_t i = 0; i < simulator.sequences().size(); ++i) {
+    if (simulator.sequences()[i].kind == sim::SequenceKind::kBodyScan) body_index = static_cast<int>(i);
+  }
+  EXPECT_GE(body_index, 0);
+  MarkerDetectorOptions detector_options;
+  detector_options.id_ranges = {{100, 199}};
+  detector_options.edge.input_srgb = true;  // the simulator writes sRGB, as cameras do
+  MarkerDetector detector(detector_options);
+  for (int f = 0; f < frames; ++f) {
+    const sim::SimulatedFrame frame = simulator.RenderFrame(body_index, f);
+    RgbdFrame rgbd;
+    rgbd.index = f;
+    rgbd.timestamp_s = frame.timestamp_s;
+    rgbd.color = frame.color;
+    rgbd.depth = frame.depth;
+    rgbd.depth_scale = scan.intrinsics.depth_scale;
+    scan.room_from_model = *frame.room_from_model;
+    scan.views.push_back(MakeBodyScanView(rgbd, frame.room_from_camera, &detector, scan.intrinsics, 0.03));
+  }
+  return scan;
+}
+
+TEST(BodyMarkerMap, RecoversStickerPosesFromTrueCameras) {
+  const Scan scan = RenderScan("xtion", 24, 3);
+  const BodyMarkerMapResult map = BuildBodyMarkerMap(scan.views, scan.intrinsics);
+  ASSERT_TRUE(map.ok());
+  EXPECT_GE(map.markers.size(), 5u);
+  std::vector<double> errors_mm;
+  for (const auto& estimate : map.markers) {
+    const sim::SimulatedMarker* truth = nullptr;
+    for (const auto& m : scan.truth.body_markers) {
+      if (m.id == estimate.marker_id) truth = &m;
+    }
+    ASSERT_NE(truth, nullptr) << "marker " << estimate.marker_id << " does not exist";
+    const Rigid3d room_from_marker_true = scan.room_from_model * truth->parent_from_marker;
+    const PoseError e = ComputePoseError(room_from_marker_true, estimate.room_from_marker);
+    errors_mm.push_back(e.translation_mm);
+    EXPECT_LT(e.translation_mm, 1.0) << "marker " << estimate.marker_id;
+    EXPECT_LT(e.rotation_deg, 2.0) << "marker " << estimate.marker_id;
+    EXPECT_LT(estimate.rms_px, 0.5) << "marker " << estimate.marker_id;
+  }
+  std::sort(errors_mm.begin(), errors_mm.end());
+  EXPECT_LT(errors_mm[errors_mm.size() / 2], 0.5);  // median
+  RecordProperty("median_error_mm", std::to_string(errors_mm[errors_mm.size() / 2]));
+}
+
+TEST(BodyMarkerMap, HiddenStickerIsRejectedNotGuessed) {
+  Scan scan = RenderScan("xtion", 12, 5);
+  ASSERT_FALSE(scan.views.empty());
+  // Hide one sticker from all but two frames (a hand over it).
+  int hidden = -1;
+  for (const auto& v : scan.views) {
+    if (!v.markers.empty()) hidden = v.markers.front().marker_id;
+  }
+  ASSERT_GE(hidden, 0);
+  int kept = 0;
+  for (auto& v : scan.views) {
+    auto& m = v.markers;
+    m.erase(std::remove_if(m.begin(), m.end(),
+                           [&](const BodyMarkerView& x) { return x.marker_id == hidden && kept++ >= 2; }),
+            m.end());
+  }
+  const BodyMarkerMapResult map = BuildBodyMarkerMap(scan.views, scan.intrinsics);
+  EXPECT_TRUE(map.ok());
+  EXPECT_EQ(map.rejected.count(hidden), 1u);
+  for (const auto& e : map.markers) EXPECT_NE(e.marker_id, hidden);
+}
+
+TEST(BodyMarkerMap, NoStickersGivesAnEmptyMap) {
+  std::vector<BodyScanView> views(5);
+  const BodyMarkerMapResult map = BuildBodyMarkerMap(views, CameraIntrinsics());
+  EXPECT_FALSE(map.ok());
+  EXPECT_TRUE(map.rejected.empty());
+}
+
+}  // namespace
+}  // namespace arpos
