@@ -1,4 +1,5 @@
 #include "geometry/mesh_io.h"
+#include "geometry/mesh_file_check.h"
 
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
@@ -55,6 +56,8 @@ TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadO
     ARPOS_INPUT_ERROR(path.string() << ": units scale must be positive, got "
                                     << options.units_scale);
   }
+  // assimp 5.2 crashes or invents faces on some malformed files: refuse them first.
+  CheckMeshFileStructure(path);
   Assimp::Importer importer;
   // Drop everything we do not use so assimp does less work.
   int removed = aiComponent_COLORS | aiComponent_TEXCOORDS | aiComponent_ANIMATIONS |

@@ -7,7 +7,7 @@
 #include <sstream>
 
 #include "geometry/mesh_io.h"
-#include "model_import/mesh_file_check.h"
+#include "geometry/mesh_file_check.h"
 #include "util/check.h"
 #include "util/string_util.h"
 

@@ -89,7 +89,10 @@ TEST_F(CaseCheckTest, TargetPoseNotRigid) {
   ExpectError("target_pose.txt", "expected a 4x4 matrix (16 numbers, row-major), found 12");
 }
 
-TEST_F(CaseCheckTest, ReferenceModelInMillimetres) {
+TEST_F(CaseCheckTest, ReferenceModelTruncatedOrInMillimetres) {
+  std::string ply = ReadTextFile(root() / "reference_model.ply");
+  WriteFileAtomic(root() / "reference_model.ply", ply.substr(0, ply.size() - 12));
+  ExpectError("reference_model.ply", "reference_model.ply");
   // The same tetrahedron scaled to millimetres.
   WriteFileAtomic(root() / "reference_model.ply",
                   "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"

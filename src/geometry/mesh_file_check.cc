@@ -1,4 +1,4 @@
-#include "model_import/mesh_file_check.h"
+#include "geometry/mesh_file_check.h"
 
 #include <cstdint>
 #include <cstdlib>
