@@ -203,37 +203,49 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
   {
     std::vector<float> zbuf;
     std::vector<int> ids;
-    std::vector<double> step(3 * N);
+    std::vector<double> step(3 * N), wstep(N);
 #pragma omp for schedule(dynamic, 1)
     for (int band = 0; band < num_bands; ++band) {
       const int row0 = band * band_rows, row1 = std::min(H, row0 + band_rows);
       const size_t n = static_cast<size_t>(row1 - row0) * W * N;
-      zbuf.assign(n, std::numeric_limits<float>::infinity());
+      // Inverse depth 1/z = sum(e) / det is linear in the image: compared
+      // without a division per sample (larger = nearer).
+      zbuf.assign(n, 0.0f);
       ids.assign(n, -1);
       // Visibility: samples of pixel (u, v) are at (u, v) + offsets[k].
       for (int ti : bands[band]) {
         const RasterTri& rt = tris[ti];
         const int x0 = std::max(0, pixel_lo(rt.xmin)), x1 = std::min(W - 1, pixel_hi(rt.xmax));
         const int y0 = std::max(row0, pixel_lo(rt.ymin)), y1 = std::min(row1 - 1, pixel_hi(rt.ymax));
+        const double inv_det = 1.0 / rt.det_abs;
         for (int k = 0; k < N; ++k) {
+          double sum = 0;
           for (int q = 0; q < 3; ++q) {
             step[3 * k + q] = rt.a[q] * offsets[k].x() + rt.b[q] * offsets[k].y();
+            sum += step[3 * k + q];
           }
+          wstep[k] = sum * inv_det;
         }
+        // How much each edge function can drop within a pixel square.
+        const double r0 = 0.5 * (std::abs(rt.a[0]) + std::abs(rt.b[0]));
+        const double r1 = 0.5 * (std::abs(rt.a[1]) + std::abs(rt.b[1]));
+        const double r2 = 0.5 * (std::abs(rt.a[2]) + std::abs(rt.b[2]));
         for (int v = y0; v <= y1; ++v) {
           for (int u = x0; u <= x1; ++u) {
             const double b0 = rt.a[0] * u + rt.b[0] * v + rt.c[0];
             const double b1 = rt.a[1] * u + rt.b[1] * v + rt.c[1];
             const double b2 = rt.a[2] * u + rt.b[2] * v + rt.c[2];
+            const bool covered = b0 >= r0 && b1 >= r1 && b2 >= r2;  // every sample inside
+            const double wbase = (b0 + b1 + b2) * inv_det;
             const size_t base = (static_cast<size_t>(v - row0) * W + u) * N;
             for (int k = 0; k < N; ++k) {
-              const double e0 = b0 + step[3 * k], e1 = b1 + step[3 * k + 1], e2 = b2 + step[3 * k + 2];
-              if (e0 < 0 || e1 < 0 || e2 < 0) continue;
-              const double sum = e0 + e1 + e2;
-              if (!(sum > 0)) continue;
-              const float z = static_cast<float>(rt.det_abs / sum);
-              if (z < zbuf[base + k]) {
-                zbuf[base + k] = z;
+              if (!covered) {
+                const double e0 = b0 + step[3 * k], e1 = b1 + step[3 * k + 1], e2 = b2 + step[3 * k + 2];
+                if (e0 < 0 || e1 < 0 || e2 < 0 || !(e0 + e1 + e2 > 0)) continue;
+              }
+              const float w = static_cast<float>(wbase + wstep[k]);
+              if (w > zbuf[base + k]) {
+                zbuf[base + k] = w;
                 ids[base + k] = ti;
               }
             }
@@ -262,12 +274,12 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
           bool uniform = centre_id >= 0 && !prepared[tris[centre_id].instance].nearest;
           if (uniform) {
             const int instance = tris[centre_id].instance;
-            const float zc = zbuf[base + centre], tolerance = 0.01f * zc;
+            const float wc = zbuf[base + centre], tolerance = 0.01f * wc;
             for (int k = 0; k < N && uniform; ++k) {
               const int id = ids[base + k];
               uniform = id == centre_id ||
                         (id >= 0 && tris[id].instance == instance &&
-                         std::abs(zbuf[base + k] - zc) < tolerance);
+                         std::abs(zbuf[base + k] - wc) < tolerance);
             }
           }
           Eigen::Vector3f sum = Eigen::Vector3f::Zero();
@@ -302,7 +314,7 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
             }
             const bool is_centre = k == centre;
             if (ti != cached_tri || is_centre) {
-              const float z = zbuf[base + k];
+              const float z = 1.0f / zbuf[base + k];
               const Eigen::Vector3f point(static_cast<float>((px - cx) / fx) * z,
                                           static_cast<float>((py - cy) / fy) * z, z);
               Eigen::Vector3f normal = rt.face_normal;
