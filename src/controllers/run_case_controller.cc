@@ -2,7 +2,10 @@
 
 #include <sstream>
 
+#include "controllers/session_controller.h"
+#include "eval/trajectory_eval.h"
 #include "geometry/mesh_io.h"
+#include "room_map/plan_stage.h"
 #include "sensor/case_check.h"
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
@@ -50,6 +53,9 @@ std::string RunCaseResult::Summary() const {
   out << "stored: patient " << patient_id.value() << ", plan " << plan_id.value() << ", session "
       << session_id.value() << ", " << recordings.size() << " recordings (" << frames
       << " frames), reference model " << reference_model_vertices << " vertices\n";
+  if (!plan_summary.empty()) out << plan_summary << "\n";
+  if (!session_summary.empty()) out << session_summary;
+  if (!evaluation.empty()) out << evaluation;
   out << "stages done: ";
   for (size_t i = 0; i < stages_done.size(); ++i) out << (i ? ", " : "") << stages_done[i];
   out << "\n";
@@ -95,9 +101,10 @@ void RunCaseController::Run() {
           : options_.patient_external_id;
   const std::string case_name = patient_external.empty() ? "case" : patient_external;
 
-  Step("storing the plan", 0.2);
+  Step("storing the plan", 0.15);
   const CameraIntrinsics& camera = folder.config.camera;
-  // Plan, recordings and session commit together: a failure stores nothing.
+  RecordingId room_recording;
+  // Patient, plan and room recording commit together: a failure stores nothing.
   database_->WithTransaction([&] {
     std::optional<PatientRecord> patient = database_->FindPatient(case_name);
     if (patient) {
@@ -122,39 +129,76 @@ void RunCaseController::Run() {
                             "plan:" + std::to_string(result_.plan_id.value()),
                             "reference model " + plan.reference_model_name + ", target pose " +
                                 plan.room_from_model_target.ToString()});
+    RecordingRecord rec;
+    rec.kind = RecordingKind::kRoom;
+    rec.plan_id = result_.plan_id;
+    rec.name = "room";
+    rec.path = std::filesystem::absolute(folder.room_dir).lexically_normal().string();
+    rec.frame_count = static_cast<std::int64_t>(Sequence::Open(folder.room_dir).size());
+    rec.intrinsics = ToRecordingIntrinsics(camera);
+    result_.frames += static_cast<int>(rec.frame_count);
+    room_recording = database_->AddRecording(rec);
+    result_.recordings.push_back(room_recording);
+  });
+  result_.stages_done.push_back("plan stored");
 
-    auto add_recording = [&](RecordingKind kind, const std::string& name,
-                             const std::filesystem::path& dir) {
+  Step("building the room map", 0.2);
+  RoomMapStageOptions map_options;
+  map_options.threads = options_.threads;
+  map_options.actor = options_.actor;
+  const StoredRoomMap room_map =
+      BuildAndStoreRoomMap(database_, result_.plan_id, room_recording, folder, map_options);
+  result_.room_map_id = room_map.room_map_id;
+  result_.plan_summary = StringPrintf("room map %lld: ", static_cast<long long>(room_map.room_map_id.value())) +
+                         room_map.build.report.ToText();
+  result_.stages_done.push_back("room map");
+
+  Step("session stage", 0.45);
+  SessionStageOptions session_options;
+  session_options.case_dir = folder.root;
+  session_options.plan_id = result_.plan_id;
+  session_options.out_dir = options_.out_dir;
+  session_options.threads = options_.threads;
+  session_options.actor = options_.actor;
+  SessionController session(session_options, database_);
+  session.Run();
+  const SessionStageResult& s = session.result();
+  result_.session_id = s.session_id;
+  result_.recordings.push_back(s.recording_id);
+  result_.frames += s.frames;
+  result_.session_summary = s.Summary();
+  result_.stages_done.push_back("body marker map");
+  result_.stages_done.push_back("reconstruction");
+  result_.stages_done.push_back("alignment");
+
+  Step("registering the tracking recordings", 0.9);
+  database_->WithTransaction([&] {
+    for (const auto& [name, dir] : folder.tracking) {
       RecordingRecord rec;
-      rec.kind = kind;
-      if (kind == RecordingKind::kRoom) {
-        rec.plan_id = result_.plan_id;
-      } else {
-        rec.session_id = result_.session_id;
-      }
+      rec.kind = RecordingKind::kTracking;
+      rec.session_id = result_.session_id;
       rec.name = name;
       rec.path = std::filesystem::absolute(dir).lexically_normal().string();
       rec.frame_count = static_cast<std::int64_t>(Sequence::Open(dir).size());
       rec.intrinsics = ToRecordingIntrinsics(camera);
       result_.frames += static_cast<int>(rec.frame_count);
       result_.recordings.push_back(database_->AddRecording(rec));
-    };
-    add_recording(RecordingKind::kRoom, "room", folder.room_dir);
-
-    SessionRecord session;
-    session.plan_id = result_.plan_id;
-    session.operator_name = options_.actor;
-    session.notes = "run-case " + folder.root.string();
-    result_.session_id = database_->AddSession(session);
-    database_->AppendAudit({AuditId(), 0, options_.actor, "open_session",
-                            "session:" + std::to_string(result_.session_id.value()), ""});
-    add_recording(RecordingKind::kBodyScan, "body_scan", folder.body_scan_dir);
-    for (const auto& [name, dir] : folder.tracking) add_recording(RecordingKind::kTracking, name, dir);
+    }
   });
-  result_.stages_done.push_back("plan stored");
-  result_.stages_done.push_back("recordings registered");
+  result_.stages_done.push_back("tracking recordings registered");
+
+  // Ground truth, where the case has it.
+  const Sequence scan = Sequence::Open(folder.body_scan_dir);
+  std::ostringstream evaluation;
+  if (const auto body_gt = scan.BodyGroundTruth(); body_gt && !body_gt->empty()) {
+    std::vector<StampedPose> estimate;
+    for (const auto& p : *body_gt) estimate.push_back({p.timestamp_s, s.room_from_model});
+    const TrajectoryEvaluation e = EvaluateTrajectory(*body_gt, estimate);
+    evaluation << StringPrintf("model pose at scan time vs body_groundtruth.txt: %.3f mm, %.4f deg\n",
+                               e.translation_mm.mean, e.rotation_deg.mean);
+  }
+  result_.evaluation = evaluation.str();
   Step("done", 1.0);
-  ARPOS_INFO("run-case: " << result_.Summary());
 }
 
 }  // namespace arpos

@@ -4,10 +4,13 @@
 ///
 /// Stages, in order: validate the case (CheckCase); import the reference
 /// model and target pose into a plan (patient = the case folder's name unless
-/// given); register the room, body-scan and tracking recordings; open a
-/// session. Later stages (room map, body marker map, reconstruction,
-/// alignment, tracking) join here as they are built. Every write is logged
-/// in the audit log with `actor`.
+/// given) with its room recording; build and store the room map (planning);
+/// the session stage on body_scan/ (body marker map, reconstruction, mesh,
+/// alignment: SessionController); register the tracking recordings in that
+/// session. Where the case has ground truth, the body-scan camera poses and
+/// the model pose at scan time are evaluated against it (DATASET.md figures).
+/// Tracking joins here when it is built. Every write is logged in the audit
+/// log with `actor`.
 
 #include <filesystem>
 #include <optional>
@@ -26,6 +29,8 @@ struct RunCaseOptions {
   std::string patient_external_id;  ///< empty: the case folder's name
   std::string actor = "arpos run-case";
   bool read_all_images = true;      ///< false: check a sample of the images
+  std::optional<std::filesystem::path> out_dir;  ///< session outputs (model_pose.txt, ...)
+  int threads = 2;
 
   /// Empty if valid, else what is wrong.
   std::string Check() const;
@@ -40,6 +45,11 @@ struct RunCaseResult {
   int frames = 0;
   std::vector<std::string> warnings;  ///< from the case check
   std::vector<std::string> stages_done;
+  RoomMapId room_map_id;
+  std::string plan_summary;     ///< room map figures
+  std::string session_summary;  ///< session stage figures
+  /// Against ground truth, when the case has it (empty otherwise).
+  std::string evaluation;
   /// A person-readable summary of what was done and stored.
   std::string Summary() const;
 };

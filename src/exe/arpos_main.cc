@@ -41,6 +41,8 @@ const std::vector<Command>& Commands() {
       {"gui", "open the wizard (planning, session, tracking, audit)", arpos::RunGuiCommand},
 #endif
       {"run-case", "run every stage on a case folder and store the results", arpos::RunRunCaseCommand},
+      {"session", "session stage: body marker map, reconstruction, model alignment",
+       arpos::RunSessionCommand},
       {"check", "validate a case folder and report every problem", arpos::RunCheckCommand},
 #ifdef ARPOS_HAVE_IMPORT_MODEL
       {"import-model", "import the reference body surface (mesh, CT series, RTSTRUCT)",

@@ -11,5 +11,6 @@ namespace arpos {
 int RunCheckCommand(const std::vector<std::string>& args);
 int RunEvaluateCommand(const std::vector<std::string>& args);
 int RunRunCaseCommand(const std::vector<std::string>& args);
+int RunSessionCommand(const std::vector<std::string>& args);
 
 }  // namespace arpos

@@ -1,0 +1,402 @@
+#include "controllers/session_controller.h"
+
+#include <chrono>
+#include <sstream>
+
+#include "geometry/mesh_io.h"
+#include "geometry/so3.h"
+#include "registration/global_registration.h"
+#include "registration/mesh_cloud.h"
+#include "registration/poisson.h"
+#include "registration/preprocess.h"
+#include "registration/reconstruction.h"
+#include "registration/registration.h"
+#include "room_map/camera_localizer.h"
+#include "room_map/plan_stage.h"
+#include "sensor/case_folder.h"
+#include "sensor/sequence.h"
+#include "sensor/tum_io.h"
+#include "store/database.h"
+#include "util/file.h"
+#include "util/logging.h"
+#include "util/string_util.h"
+
+namespace arpos {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+StoredPointCloud ToStored(const PointCloud& cloud) {
+  StoredPointCloud stored;
+  stored.points.reserve(cloud.size());
+  for (size_t i = 0; i < cloud.size(); ++i) stored.points.push_back(cloud.point3(i).cast<float>());
+  if (cloud.has_normals()) {
+    for (size_t i = 0; i < cloud.size(); ++i) stored.normals.push_back(cloud.normal3(i).cast<float>());
+  }
+  return stored;
+}
+
+StoredTriangleMesh ToStored(const TriangleMesh& mesh) {
+  StoredTriangleMesh stored;
+  stored.vertices = mesh.vertices;
+  for (const auto& f : mesh.faces) {
+    stored.faces.push_back({static_cast<std::uint32_t>(f[0]), static_cast<std::uint32_t>(f[1]),
+                            static_cast<std::uint32_t>(f[2])});
+  }
+  return stored;
+}
+
+TriangleMesh FromStored(const StoredTriangleMesh& stored) {
+  TriangleMesh mesh;
+  mesh.vertices = stored.vertices;
+  for (const auto& f : stored.faces) {
+    mesh.faces.emplace_back(static_cast<int>(f[0]), static_cast<int>(f[1]), static_cast<int>(f[2]));
+  }
+  return mesh;
+}
+
+// Box around the reference model at its target pose, grown by `margin_m`:
+// the patient lies within a few centimetres of the target.
+OrientedBox BoxAroundModel(const TriangleMesh& model, const Rigid3d& room_from_model, double margin_m) {
+  Eigen::Vector3f lo, hi;
+  model.Bounds(&lo, &hi);
+  const Eigen::Vector3d centre_in_model = 0.5 * (lo + hi).cast<double>();
+  OrientedBox box;
+  box.frame_from_box = room_from_model * Rigid3d(Eigen::Quaterniond::Identity(), centre_in_model);
+  box.half_extents_m = 0.5 * (hi - lo).cast<double>() + Eigen::Vector3d::Constant(margin_m);
+  return box;
+}
+
+// Point-to-plane ICP of the scene onto the densely sampled model surface,
+// coarse to fine; returns model_from_scene.
+RegistrationResult RefineOnModel(const PointCloud& scene, const PointCloud& model_dense,
+                                 const KdTree& model_tree, const Rigid3d& model_from_scene,
+                                 int threads) {
+  RegistrationOptions icp;
+  icp.num_threads = threads;
+  icp.max_iterations = 30;
+  icp.robust_kernel = RobustKernel::kHuber;
+  icp.robust_scale_m = 0.003;
+  Rigid3d estimate = model_from_scene;
+  RegistrationResult result;
+  for (const double gate_m : {0.03, 0.01, 0.005}) {
+    icp.max_correspondence_distance_m = gate_m;
+    result = AlignPointToPlane(scene, model_dense, model_tree, estimate, icp);
+    estimate = result.target_from_source;
+  }
+  return result;
+}
+
+}  // namespace
+
+std::string SessionStageOptions::Check() const {
+  if (case_dir.empty()) return "no case folder given";
+  if (marker_frame_step < 1) return "marker_frame_step must be at least 1";
+  if (reconstruction_frame_step < 1) return "reconstruction_frame_step must be at least 1";
+  if (poisson_depth < 4 || poisson_depth > 11) return "poisson_depth must be in 4..11";
+  if (threads < 1) return "threads must be at least 1";
+  if (actor.empty()) return "actor must not be empty";
+  return "";
+}
+
+std::string SessionStageResult::Summary() const {
+  std::ostringstream out;
+  const Eigen::Vector3d r_deg = room_from_model.RotationVector() * (180.0 / M_PI);
+  out << StringPrintf(
+      "session %lld of plan %lld: %d of %d body-scan frames localised\n"
+      "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
+      "reconstruction: %d points, mesh %d vertices\n"
+      "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
+      "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) deg\n"
+      "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
+      "%.2f, store %.2f, total %.2f\n",
+      static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
+      frames_localized, frames, marker_map.markers.size(), marker_map.mean_rms_px,
+      marker_map.rejected.size(), reconstruction_points, mesh_vertices, alignment_method.c_str(),
+      alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
+      1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
+      1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
+      times.marker_map_s, times.reconstruction_s, times.mesh_s, times.alignment_s, times.store_s,
+      times.total_s);
+  return out.str();
+}
+
+SessionController::SessionController(SessionStageOptions options, Database* database,
+                                     ControllerCallbacks callbacks)
+    : Controller(std::move(callbacks)), options_(std::move(options)), database_(database) {}
+
+void SessionController::Run() {
+  const std::string problem = options_.Check();
+  if (!problem.empty()) ARPOS_INPUT_ERROR("session: " << problem);
+  ARPOS_CHECK(database_ != nullptr, "the session stage needs a session store");
+  result_ = SessionStageResult();
+  const auto start = Clock::now();
+
+  Step("loading the case and the plan", 0.0);
+  const CaseFolder folder = LoadCaseFolder(options_.case_dir);
+  const CameraIntrinsics& camera = folder.config.camera;
+  PlanId plan_id;
+  RoomMapId room_map_id;
+  RoomMap room_map = LoadRoomMapForLocalization(database_, options_.plan_id,
+                                                CasePatientId(folder.root), &plan_id, &room_map_id);
+  const std::optional<PlanRecord> plan = database_->GetPlan(plan_id);
+  if (!plan) ARPOS_INPUT_ERROR("plan " << plan_id.value() << " does not exist");
+  if (plan->reference_model.vertices.empty()) {
+    ARPOS_INPUT_ERROR("plan " << plan_id.value() << " has no reference model");
+  }
+  result_.plan_id = plan_id;
+  const TriangleMesh model = FromStored(plan->reference_model);
+  const Sequence scan = Sequence::Open(folder.body_scan_dir);
+  result_.frames = static_cast<int>(scan.size());
+
+  // 1-3. Localise, collect sticker views, fuse depth.
+  Step("localising the body scan", 0.05);
+  CameraLocalizer localizer(room_map, camera, MakeCameraLocalizerOptions(folder.config));
+  MarkerDetectorOptions detector_options;
+  detector_options.dictionary = folder.config.dictionary;
+  detector_options.id_ranges = {{folder.config.body_markers.id_min, folder.config.body_markers.id_max}};
+  detector_options.intrinsics = camera;
+  detector_options.edge.input_srgb = true;  // colour cameras deliver sRGB-encoded images
+  MarkerDetector detector(detector_options);
+
+  ReconstructionOptions recon_options;
+  recon_options.frame_stride = 1;  // frames are chosen here
+  recon_options.crop_box = BoxAroundModel(model, plan->room_from_model_target, 0.12);
+  recon_options.num_threads = options_.threads;
+  ReconstructionBuilder builder(recon_options);
+  DepthCloudOptions depth_options;
+  depth_options.stride_px = camera.width > 800 ? 4 : 2;
+  depth_options.max_depth_m = 2.5;
+
+  std::vector<BodyScanView> views;
+  std::vector<StampedPose> camera_poses;
+  Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
+  double t_localize = 0, t_markers = 0, t_recon = 0;
+  for (size_t i = 0; i < scan.size(); ++i) {
+    const bool for_markers = i % options_.marker_frame_step == 0;
+    const bool for_recon = i % options_.reconstruction_frame_step == 0;
+    if (!for_markers && !for_recon) continue;
+    if (i % 20 == 0) Step(StringPrintf("body scan frame %zu of %zu", i + 1, scan.size()), 0.05 + 0.55 * i / scan.size());
+    auto t0 = Clock::now();
+    const RgbdFrame frame = scan.LoadFrame(i, camera);
+    const LocalizationResult located = localizer.Localize(frame);
+    t_localize += SecondsSince(t0);
+    if (!located.ok) continue;
+    ++result_.frames_localized;
+    camera_poses.push_back({frame.timestamp_s, located.room_from_camera});
+    camera_centre_sum += located.room_from_camera.translation;
+    if (for_markers) {
+      t0 = Clock::now();
+      views.push_back(MakeBodyScanView(frame, located.room_from_camera, &detector, camera,
+                                       folder.config.body_markers.size_m));
+      t_markers += SecondsSince(t0);
+    }
+    if (for_recon) {
+      t0 = Clock::now();
+      builder.AddFrame(DepthToCloud(frame, camera, depth_options), located.room_from_camera);
+      t_recon += SecondsSince(t0);
+    }
+  }
+  if (camera_poses.empty()) {
+    ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
+                      << ": the camera could not be localised in the room map in any frame");
+  }
+
+  Step("building the body marker map", 0.6);
+  auto t0 = Clock::now();
+  BodyMarkerMapOptions map_options;
+  map_options.marker_size_m = folder.config.body_markers.size_m;
+  result_.marker_map = BuildBodyMarkerMap(views, camera, map_options);
+  t_markers += SecondsSince(t0);
+  result_.times.localization_s = t_localize;
+  result_.times.marker_map_s = t_markers;
+
+  // Couch and room removal: the couch top is the dominant plane facing the
+  // cameras; keep what lies above it and its largest connected part.
+  Step("cropping the reconstruction to the body", 0.65);
+  t0 = Clock::now();
+  PointCloud fused = builder.Cloud();
+  const Eigen::Vector3d box_centre = recon_options.crop_box->frame_from_box.translation;
+  const Eigen::Vector3d towards_cameras =
+      (camera_centre_sum / camera_poses.size() - box_centre).normalized();
+  PlaneFitOptions plane_options;
+  plane_options.expected_normal = towards_cameras;
+  plane_options.max_angle_rad = RadFromDeg(40);
+  plane_options.distance_threshold_m = 0.006;
+  const auto couch = FitPlaneRansac(fused, plane_options);
+  if (couch) fused = KeepAbovePlane(fused, couch->plane, 0.015);
+  PointCloud body = LargestCluster(fused, 0.025);
+  t_recon += SecondsSince(t0);
+  result_.times.reconstruction_s = t_recon;
+  result_.reconstruction_points = static_cast<int>(body.size());
+  if (body.size() < 500) {
+    ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
+                      << ": no usable body surface in the scan (" << body.size()
+                      << " points near the planned patient position after removing the couch)");
+  }
+
+  Step("meshing (Poisson)", 0.7);
+  t0 = Clock::now();
+  {
+    const KdTree tree(body);
+    NormalOptions normal_options;
+    normal_options.viewpoint = camera_centre_sum / camera_poses.size();
+    normal_options.orient_like_existing = false;
+    normal_options.num_threads = options_.threads;
+    EstimateNormals(&body, tree, normal_options);
+    // Orient normals towards the cameras' side (the visible skin faces them).
+    for (size_t i = 0; i < body.size(); ++i) {
+      if (body.normal3(i).dot(towards_cameras) < 0) body.normals[i] = -body.normals[i];
+    }
+  }
+  PoissonOptions poisson;
+  poisson.depth = options_.poisson_depth;
+  poisson.prune_distance_m = 0.01;
+  const PoissonResult mesh = PoissonMesh(body, poisson);
+  result_.mesh_vertices = static_cast<int>(mesh.mesh.vertices.size());
+  result_.times.mesh_s = SecondsSince(t0);
+
+  // 4. Alignment.
+  Step("aligning the reference model", 0.8);
+  t0 = Clock::now();
+  const PointCloud model_dense = SampleMeshSurface(model, 0.002);
+  const KdTree model_tree(model_dense);
+  Rigid3d room_from_model_initial;
+  AlignmentMethod method;
+  double initial_fitness = 0, initial_rmse = 0;
+  std::string status = "ok";
+  if (options_.initial_alignment) {
+    const Eigen::Matrix4d m = ReadMatrix4(*options_.initial_alignment);
+    std::string reason;
+    if (!IsRigidTransform(m, 1e-4, &reason)) {
+      ARPOS_INPUT_ERROR(options_.initial_alignment->string() << ": not a rigid transform: " << reason);
+    }
+    room_from_model_initial = Rigid3d::FromMatrix(m, 1e-4);
+    method = AlignmentMethod::kManual;
+    result_.alignment_method = "manual";
+  } else {
+    GlobalRegistrationOptions global;
+    global.prior_target_from_source = plan->room_from_model_target;
+    global.max_prior_translation_m = 0.15;
+    global.max_prior_rotation_rad = RadFromDeg(20);
+    global.num_threads = options_.threads;
+    const PointCloud model_sparse = SampleMeshSurface(model, 0.005);
+    const GlobalRegistrationResult g = AlignGlobal(model_sparse, body, global);
+    if (g.status == GlobalRegistrationStatus::kFailed) {
+      ARPOS_INPUT_ERROR("automatic alignment failed: " << g.reason
+                        << "; give a manual alignment with --initial-alignment");
+    }
+    if (g.status == GlobalRegistrationStatus::kAmbiguous) status = "ambiguous: " + g.reason;
+    room_from_model_initial = g.target_from_source;
+    initial_fitness = g.fitness;
+    initial_rmse = g.rmse_m;
+    method = AlignmentMethod::kAutomatic;
+    result_.alignment_method = "automatic";
+  }
+  const RegistrationResult refined =
+      RefineOnModel(body, model_dense, model_tree, room_from_model_initial.Inverse(), options_.threads);
+  result_.room_from_model = refined.target_from_source.Inverse();
+  result_.alignment_fitness = refined.fitness;
+  result_.alignment_rmse_m = refined.rmse_m;
+  if (refined.fitness < 0.5) status = StringPrintf("poor fit: only %.0f %% of the body surface matches", 100 * refined.fitness);
+  result_.alignment_status = status;
+  result_.times.alignment_s = SecondsSince(t0);
+  for (const auto& m : result_.marker_map.markers) {
+    result_.model_from_markers[m.marker_id] = result_.room_from_model.Inverse() * m.room_from_marker;
+  }
+
+  // Store everything in one transaction.
+  Step("storing the session", 0.95);
+  t0 = Clock::now();
+  database_->WithTransaction([&] {
+    SessionRecord session;
+    session.plan_id = plan_id;
+    session.fraction = static_cast<int>(database_->ListSessions(plan_id).size()) + 1;
+    session.operator_name = options_.actor;
+    session.notes = "session stage on " + folder.root.string();
+    result_.session_id = database_->AddSession(session);
+    const std::string session_entity = "session:" + std::to_string(result_.session_id.value());
+    database_->AppendAudit({AuditId(), 0, options_.actor, "open_session", session_entity,
+                            "plan " + std::to_string(plan_id.value())});
+    RecordingRecord recording;
+    recording.session_id = result_.session_id;
+    recording.kind = RecordingKind::kBodyScan;
+    recording.name = "body_scan";
+    recording.path = std::filesystem::absolute(folder.body_scan_dir).lexically_normal().string();
+    recording.frame_count = static_cast<std::int64_t>(scan.size());
+    recording.intrinsics = {camera.width, camera.height, camera.fx, camera.fy, camera.cx,
+                            camera.cy, camera.distortion, camera.depth_scale};
+    result_.recording_id = database_->AddRecording(recording);
+
+    BodyMarkerMapRecord map;
+    map.session_id = result_.session_id;
+    map.recording_id = result_.recording_id;
+    map.marker_size_m = folder.config.body_markers.size_m;
+    for (const auto& m : result_.marker_map.markers) {
+      map.markers.push_back({m.marker_id, m.room_from_marker, m.rms_px, m.num_views});
+    }
+    map.mean_residual_px = result_.marker_map.mean_rms_px;
+    map.max_residual_px = std::max(result_.marker_map.max_rms_px, map.mean_residual_px);
+    result_.body_marker_map_id = database_->AddBodyMarkerMap(map);
+    database_->AppendAudit({AuditId(), 0, options_.actor, "add_body_marker_map",
+                            "body_marker_map:" + std::to_string(result_.body_marker_map_id.value()),
+                            StringPrintf("%zu stickers, mean rms %.3f px", map.markers.size(),
+                                         map.mean_residual_px)});
+
+    ReconstructionRecord recon;
+    recon.session_id = result_.session_id;
+    recon.recording_id = result_.recording_id;
+    recon.cloud = ToStored(body);
+    if (!mesh.mesh.empty()) recon.mesh = ToStored(mesh.mesh);
+    recon.num_frames_used = builder.frames_used();
+    recon.voxel_size_m = recon_options.output_voxel_m;
+    result_.reconstruction_id = database_->AddReconstruction(recon);
+    database_->AppendAudit({AuditId(), 0, options_.actor, "add_reconstruction",
+                            "reconstruction:" + std::to_string(result_.reconstruction_id.value()),
+                            StringPrintf("%zu points, %zu mesh vertices", body.size(),
+                                         mesh.mesh.vertices.size())});
+
+    AlignmentRecord initial;
+    initial.reconstruction_id = result_.reconstruction_id;
+    initial.method = method;
+    initial.reconstruction_from_model = room_from_model_initial;
+    initial.fitness = std::clamp(initial_fitness, 0.0, 1.0);
+    initial.rmse_m = std::max(0.0, initial_rmse);
+    initial.options = options_.initial_alignment ? "file: " + options_.initial_alignment->string()
+                                                 : "global registration, target-pose prior";
+    const AlignmentId initial_id = database_->AddAlignment(initial);
+    AlignmentRecord icp;
+    icp.reconstruction_id = result_.reconstruction_id;
+    icp.parent_alignment_id = initial_id;
+    icp.method = AlignmentMethod::kIcp;
+    icp.reconstruction_from_model = result_.room_from_model;
+    icp.fitness = std::clamp(refined.fitness, 0.0, 1.0);
+    icp.rmse_m = refined.rmse_m;
+    icp.num_inliers = refined.num_inliers;
+    icp.options = "point-to-plane, reconstruction onto the model surface, gates 30/10/5 mm; status: " + status;
+    result_.alignment_id = database_->AddAlignment(icp);
+    database_->AppendAudit({AuditId(), 0, options_.actor, "add_alignment",
+                            "alignment:" + std::to_string(result_.alignment_id.value()),
+                            result_.alignment_method + " + ICP: " + status +
+                                StringPrintf(", rmse %.2f mm", 1000 * refined.rmse_m)});
+  });
+  result_.times.store_s = SecondsSince(t0);
+
+  if (options_.out_dir) {
+    CreateDirectories(*options_.out_dir);
+    std::vector<StampedPose> model_poses;
+    for (size_t i = 0; i < scan.size(); ++i) model_poses.push_back({scan.timestamp_s(i), result_.room_from_model});
+    WriteTrajectory(*options_.out_dir / "model_pose.txt", model_poses,
+                    "reference model -> room at body-scan time (arpos session)");
+    WriteTrajectory(*options_.out_dir / "camera_pose.txt", camera_poses,
+                    "camera -> room, body-scan frames used (arpos session)");
+    if (!mesh.mesh.empty()) SaveTriangleMeshPly(mesh.mesh, *options_.out_dir / "reconstruction_mesh.ply");
+  }
+  result_.times.total_s = SecondsSince(start);
+  Step("done", 1.0);
+}
+
+}  // namespace arpos

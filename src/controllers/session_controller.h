@@ -1,0 +1,98 @@
+#pragma once
+/// `arpos session`: the session stage of one treatment.
+///
+/// From the case's body scan (patient lying still, wearing ArUco stickers):
+///  1. localise every used frame's camera in the plan's room map;
+///  2. body marker map: every sticker's pose in the room (body_model/);
+///  3. reconstruction: depth clouds placed by the camera poses, refined by
+///     GICP against the growing reconstruction (dynamic voxel size), cropped
+///     to the body (a box around the reference model at its target pose, the
+///     couch plane and everything under it removed, largest cluster), then
+///     meshed by Poisson;
+///  4. alignment of the reference model to the reconstruction: manual (a
+///     given 4x4) or automatic (global registration with the target pose as
+///     prior, ambiguity reported), each refined by point-to-plane ICP of the
+///     reconstruction onto the densely sampled model surface.
+///
+/// Frames: the session's body frame is the room frame during the scan, so
+/// `body_from_marker` = `room_from_marker` and `reconstruction_from_model` =
+/// `room_from_model` at scan time. What tracking needs is
+/// `model_from_marker` = `reconstruction_from_model`^-1 * `body_from_marker`
+/// per sticker (SessionStageResult::model_from_markers).
+/// Every artefact is stored (one transaction at the end) with audit entries.
+
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "body_model/body_marker_map.h"
+#include "controllers/controller.h"
+#include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
+#include "store/records.h"
+
+namespace arpos {
+
+class Database;
+
+struct SessionStageOptions {
+  std::filesystem::path case_dir;
+  std::optional<PlanId> plan_id;  ///< else the newest plan of the case's patient
+  /// Manual alignment: a 4x4 row-major room_from_model (= reconstruction_from_model)
+  /// file; without it the alignment is automatic.
+  std::optional<std::filesystem::path> initial_alignment;
+  /// If set: writes model_pose.txt (TUM, every body_scan frame) and the
+  /// reconstruction cloud and mesh as PLY files there.
+  std::optional<std::filesystem::path> out_dir;
+  int marker_frame_step = 2;         ///< body marker map from every n-th frame
+  int reconstruction_frame_step = 10;  ///< l of the paper
+  int poisson_depth = 8;
+  int threads = 2;
+  std::string actor = "arpos session";
+
+  std::string Check() const;  ///< empty if valid
+};
+
+struct SessionStepTimes {
+  double localization_s = 0, marker_map_s = 0, reconstruction_s = 0, mesh_s = 0,
+         alignment_s = 0, store_s = 0, total_s = 0;
+};
+
+struct SessionStageResult {
+  PlanId plan_id;
+  SessionId session_id;
+  RecordingId recording_id;
+  BodyMarkerMapId body_marker_map_id;
+  ReconstructionId reconstruction_id;
+  AlignmentId alignment_id;  ///< the final (ICP-refined) alignment
+  int frames = 0, frames_localized = 0;
+  BodyMarkerMapResult marker_map;
+  int reconstruction_points = 0;
+  int mesh_vertices = 0;
+  std::string alignment_method;  ///< "manual" or "automatic"
+  std::string alignment_status;  ///< ok, or why the automatic result is doubtful
+  Rigid3d room_from_model;       ///< reference model pose at scan time
+  double alignment_fitness = 0, alignment_rmse_m = 0;
+  std::map<int, Rigid3d> model_from_markers;
+  SessionStepTimes times;
+  std::string Summary() const;
+};
+
+class SessionController : public Controller {
+ public:
+  SessionController(SessionStageOptions options, Database* database,
+                    ControllerCallbacks callbacks = {});
+  /// Throws InputError for an unusable case (no plan or room map, no body in
+  /// the scan, the camera never localised), Cancelled.
+  void Run() override;
+  const SessionStageResult& result() const { return result_; }
+
+ private:
+  SessionStageOptions options_;
+  Database* database_;
+  SessionStageResult result_;
+};
+
+}  // namespace arpos
