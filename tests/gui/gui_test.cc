@@ -7,6 +7,7 @@
 #include <string>
 
 #include "sensor/test_case_builder.h"
+#include "store/sqlite_database.h"
 #include "util/file.h"
 
 namespace arpos {
@@ -28,8 +29,18 @@ class GuiTest : public ::testing::Test {
   void SetUp() override {
     if (!std::getenv("DISPLAY")) GTEST_SKIP() << "no X display: run through tools/test.sh (xvfb-run)";
     testing::WriteTinyCase(case_dir());
-    std::string out;
-    ASSERT_EQ(RunArpos("run-case " + case_dir().string() + " --store " + store().string(), &out), 0) << out;
+    // A store with a plan whose reference model is a 10 cm tetrahedron.
+    auto database = SqliteDatabase::Open(store().string());
+    PatientRecord patient;
+    patient.external_id = "case";
+    PlanRecord plan;
+    plan.patient_id = database->AddPatient(patient);
+    plan.name = "case plan";
+    plan.reference_model_name = "reference_model.ply";
+    plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}, {0, 0, 0.1f}};
+    plan.reference_model.faces = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    database->AddPlan(plan);
+    database->AppendAudit({AuditId(), 0, "gui_test", "add_plan", "plan:1", ""});
   }
   std::filesystem::path case_dir() const { return dir_.path() / "case"; }
   std::filesystem::path store() const { return dir_.path() / "store.db"; }
