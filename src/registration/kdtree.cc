@@ -54,7 +54,7 @@ class RadiusSet {
   RadiusSet(double r2, std::vector<size_t>* out)
       : bound_(std::nextafter(r2, std::numeric_limits<double>::infinity())), out_(out) {}
   double worst() const { return bound_; }
-  void Add(double, size_t index) { out_->push_back(index); }
+  void Add(double, size_t position) { out_->push_back(position); }
 
  private:
   double bound_;
@@ -142,7 +142,7 @@ void KdTree::SearchNode(uint32_t id, const Eigen::Vector4d& query, double mindis
   if (node.axis < 0) {
     for (uint32_t i = node.begin; i < node.end; ++i) {
       const double d = (points_[i] - query).squaredNorm();
-      if (d < set.worst()) set.Add(d, indices_[i]);
+      if (d < set.worst()) set.Add(d, i);  // tree position; mapped by the caller
     }
     return;
   }
@@ -181,7 +181,7 @@ bool KdTree::Nearest(const Eigen::Vector4d& query, size_t* index, double* sq_dis
   NearestSet set(max_sq_dist_m2);
   Search(Eigen::Vector4d(query.x(), query.y(), query.z(), 1.0), set);
   if (!set.found_) return false;
-  *index = set.index_;
+  *index = indices_[set.index_];
   *sq_dist_m2 = set.best_;
   return true;
 }
@@ -191,7 +191,22 @@ size_t KdTree::Knn(const Eigen::Vector4d& query, int k, size_t* indices, double*
   if (k <= 0) return 0;
   KnnSet set(k, indices, sq_dists_m2, max_sq_dist_m2);
   Search(Eigen::Vector4d(query.x(), query.y(), query.z(), 1.0), set);
-  return static_cast<size_t>(set.count());
+  const int n = set.count();
+  for (int i = 0; i < n; ++i) indices[i] = indices_[indices[i]];
+  return static_cast<size_t>(n);
+}
+
+size_t KdTree::KnnWithPoints(const Eigen::Vector4d& query, int k, size_t* indices,
+                             double* sq_dists_m2, Eigen::Vector4d* points) const {
+  if (k <= 0) return 0;
+  KnnSet set(k, indices, sq_dists_m2, std::numeric_limits<double>::infinity());
+  Search(Eigen::Vector4d(query.x(), query.y(), query.z(), 1.0), set);
+  const int n = set.count();
+  for (int i = 0; i < n; ++i) {
+    points[i] = points_[indices[i]];
+    indices[i] = indices_[indices[i]];
+  }
+  return static_cast<size_t>(n);
 }
 
 void KdTree::RadiusSearch(const Eigen::Vector4d& query, double radius_m,
@@ -200,6 +215,7 @@ void KdTree::RadiusSearch(const Eigen::Vector4d& query, double radius_m,
   if (radius_m < 0) return;
   RadiusSet set(radius_m * radius_m, indices);
   Search(Eigen::Vector4d(query.x(), query.y(), query.z(), 1.0), set);
+  for (size_t& i : *indices) i = indices_[i];
 }
 
 std::vector<size_t> KdTree::Knn(const Eigen::Vector3d& query, int k) const {

@@ -49,6 +49,12 @@ class KdTree {
   size_t Knn(const Eigen::Vector4d& query, int k, size_t* indices, double* sq_dists_m2,
              double max_sq_dist_m2 = std::numeric_limits<double>::infinity()) const;
 
+  /// Knn that also copies the neighbours' coordinates into `points[0..n)`
+  /// (from the tree's own contiguous copy: cheaper than gathering them from
+  /// the cloud afterwards).
+  size_t KnnWithPoints(const Eigen::Vector4d& query, int k, size_t* indices,
+                       double* sq_dists_m2, Eigen::Vector4d* points) const;
+
   /// Every point within `radius_m` (inclusive), in no particular order,
   /// appended to `indices` after clearing it.
   void RadiusSearch(const Eigen::Vector4d& query, double radius_m,

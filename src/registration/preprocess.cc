@@ -163,10 +163,12 @@ void EstimateLocalGeometry(PointCloud* cloud, const KdTree& tree, const NormalOp
   {
     std::vector<size_t> indices(k);
     std::vector<double> dists(k);
+    std::vector<Eigen::Vector4d> neighbours(k);
 #pragma omp for schedule(dynamic, 256)
     for (int64_t i = 0; i < static_cast<int64_t>(n); ++i) {
       const Eigen::Vector4d& p = cloud->points[i];
-      const size_t found = tree.Knn(p, k, indices.data(), dists.data());
+      const size_t found =
+          tree.KnnWithPoints(p, k, indices.data(), dists.data(), neighbours.data());
       Eigen::Vector4d towards = viewpoint - p;
       if (had_normals && options.orient_like_existing) towards = cloud->normals[i];
       if (found < 3) {
@@ -180,12 +182,12 @@ void EstimateLocalGeometry(PointCloud* cloud, const KdTree& tree, const NormalOp
         continue;
       }
       Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      for (size_t j = 0; j < found; ++j) mean += cloud->points[indices[j]].head<3>();
+      for (size_t j = 0; j < found; ++j) mean += neighbours[j].head<3>();
       mean /= static_cast<double>(found);
       Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
       for (size_t j = 0; j < found; ++j) {
-        const Eigen::Vector3d d = cloud->points[indices[j]].head<3>() - mean;
-        cov += d * d.transpose();
+        const Eigen::Vector3d d = neighbours[j].head<3>() - mean;
+        cov.noalias() += d * d.transpose();
       }
       cov /= static_cast<double>(found);
       Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
