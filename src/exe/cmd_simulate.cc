@@ -27,7 +27,7 @@ const char kUsage[] =
     "  --no-noise                  exact renders: no blur, noise or depth dropouts\n"
     "  --body-mesh PATH            MakeHuman base.obj (default: $ARPOS_BODY_MESH or the\n"
     "                              shared data copy)\n"
-    "  --png-compression 0..9      PNG compression level (default 3)\n"
+    "  --png-compression 0..9      PNG compression level (default 1)\n"
     "  --supersampling S           colour samples per pixel axis: 1, 3 or 5 (default 3)\n";
 
 void ParseFrames(const std::string& text, sim::SimulationOptions* options) {
@@ -84,7 +84,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     if (auto frames = args.Get("frames")) ParseFrames(*frames, &options);
     options.tracking_sequences = static_cast<int>(args.GetInt("tracking-sequences", 2));
     if (auto mesh = args.Get("body-mesh")) options.body_mesh_path = *mesh;
-    options.png_compression = static_cast<int>(args.GetInt("png-compression", 3));
+    options.png_compression = static_cast<int>(args.GetInt("png-compression", 1));
     options.supersampling = static_cast<int>(args.GetInt("supersampling", 0));
 
     const sim::Simulator simulator(options);
@@ -101,9 +101,9 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
           }
         });
     std::cout << StringPrintf(
-        "wrote %s: %d frames, %.1f MB, %.1f s (render %.1f ms/frame, write %.1f ms/frame)\n",
+        "wrote %s: %d frames, %.1f MB, %.1f s (%.1f ms/frame: render %.1f, waiting for PNG writes %.1f)\n",
         out_dir.c_str(), report.frames, report.bytes / 1e6, report.seconds,
-        1000.0 * report.render_seconds / std::max(1, report.frames),
+        1000.0 * report.seconds / std::max(1, report.frames), 1000.0 * report.render_seconds / std::max(1, report.frames),
         1000.0 * report.write_seconds / std::max(1, report.frames));
     return 0;
   } catch (const InputError& e) {

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <future>
 #include <opencv2/imgcodecs.hpp>
 
 #include "geometry/mesh_io.h"
@@ -446,25 +447,40 @@ SimulationReport Simulator::WriteCase(const std::filesystem::path& out_dir,
     CreateDirectories(dir / "depth");
     std::vector<ImageListEntry> rgb, depth;
     std::vector<StampedPose> camera_poses, body_poses;
+    // PNG encoding of frame f overlaps the rendering of frame f + 1 (the
+    // files do not depend on the order, so the output stays deterministic).
+    std::future<bool> pending;
+    std::string pending_dir;
+    auto finish_pending = [&]() {
+      if (!pending.valid()) return;
+      const auto t = Clock::now();
+      const bool ok = pending.get();
+      report.write_seconds += std::chrono::duration<double>(Clock::now() - t).count();
+      if (!ok) ARPOS_INPUT_ERROR(pending_dir << ": cannot write images");
+    };
     for (int f = 0; f < s.frames; ++f) {
       const auto t0 = Clock::now();
-      const SimulatedFrame frame = RenderFrame(static_cast<int>(q), f);
-      const auto t1 = Clock::now();
+      SimulatedFrame frame = RenderFrame(static_cast<int>(q), f);
+      report.render_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
       const std::string stamp = StringPrintf("%.6f", frame.timestamp_s);
       const std::string rgb_name = "rgb/" + stamp + ".png", depth_name = "depth/" + stamp + ".png";
-      if (!cv::imwrite((dir / rgb_name).string(), frame.color, params) ||
-          !cv::imwrite((dir / depth_name).string(), frame.depth, params)) {
-        ARPOS_INPUT_ERROR(dir.string() << ": cannot write images");
-      }
-      report.render_seconds += std::chrono::duration<double>(t1 - t0).count();
-      report.write_seconds += std::chrono::duration<double>(Clock::now() - t1).count();
       rgb.push_back({frame.timestamp_s, rgb_name, 0});
       depth.push_back({frame.timestamp_s, depth_name, 0});
       camera_poses.push_back({frame.timestamp_s, frame.room_from_camera});
       if (frame.room_from_model) body_poses.push_back({frame.timestamp_s, *frame.room_from_model});
+      finish_pending();
+      pending_dir = dir.string();
+      pending = std::async(std::launch::async,
+                           [color = frame.color, depth_image = frame.depth,
+                            rgb_path = (dir / rgb_name).string(),
+                            depth_path = (dir / depth_name).string(), params]() {
+                             return cv::imwrite(rgb_path, color, params) &&
+                                    cv::imwrite(depth_path, depth_image, params);
+                           });
       ++report.frames;
       if (progress) progress(++done, total);
     }
+    finish_pending();
     const std::string what = "ARPos simulate " + s.name + " (profile " + profile_.name + ")";
     WriteImageList(dir / "rgb.txt", rgb, what + ": colour images");
     WriteImageList(dir / "depth.txt", depth, what + ": depth images, 16-bit, registered to colour");

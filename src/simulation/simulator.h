@@ -43,7 +43,7 @@ struct SimulationOptions {
   int tracking_sequences = 2;
   /// MakeHuman base.obj; empty = DefaultBodyMeshPath().
   std::filesystem::path body_mesh_path;
-  int png_compression = 3;  ///< 0..9 (cv::IMWRITE_PNG_COMPRESSION)
+  int png_compression = 1;  ///< 0..9 (cv::IMWRITE_PNG_COMPRESSION); 1: fast, 3 % larger than 9
   int supersampling = 0;    ///< 0 = the profile's (3); else 1, 3 or 5
   /// Empty if valid, else "option: problem".
   std::string Check() const;
@@ -85,7 +85,7 @@ struct SimulationReport {
   int frames = 0;
   double seconds = 0;           ///< wall time of WriteCase
   double render_seconds = 0;    ///< rasterisation + sensor models
-  double write_seconds = 0;     ///< PNG encoding and file writes
+  double write_seconds = 0;     ///< waiting for PNG encoding and file writes (overlapped with rendering)
   uint64_t bytes = 0;           ///< size of the written case
 };
 
