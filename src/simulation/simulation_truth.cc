@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <sstream>
 
 #include "util/check.h"
@@ -11,7 +12,8 @@
 namespace arpos::sim {
 namespace {
 
-std::string Num(double v) { return StringPrintf("%.9g", v); }
+// Rounding noise (1e-16, -0) is printed as 0 so the file reads cleanly.
+std::string Num(double v) { return StringPrintf("%.9g", std::abs(v) < 1e-12 ? 0.0 : v); }
 
 std::string Matrix(const Rigid3d& pose) {
   const Eigen::Matrix4d m = pose.ToMatrix();
