@@ -83,8 +83,8 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
 
   std::vector<StampedPose> poses;
   std::ostringstream csv;
-  csv << "timestamp,status,markers,keypoints,rms_px,detection_ms,keypoints_ms,matching_ms,pnp_ms,refinement_ms,"
-         "total_ms\n";
+  csv << "timestamp,status,markers,keypoints,rms_px,position_sigma_mm,detection_ms,keypoints_ms,matching_ms,pnp_ms,"
+         "refinement_ms,total_ms\n";
   int tracked = 0, relocalized = 0, lost = 0;
   double total_ms = 0;
   for (size_t i = 0; i < sequence.size(); ++i) {
@@ -96,8 +96,9 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
     lost += r.status == LocalizationStatus::kLost;
     total_ms += r.timings.total_ms;
     const auto& t = r.timings;
-    csv << StringPrintf("%.6f,%s,%d,%d,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n", frame.timestamp_s,
-                        LocalizationStatusName(r.status), r.markers_used, r.keypoints_used, r.rms_px, t.detection_ms,
+    csv << StringPrintf("%.6f,%s,%d,%d,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n", frame.timestamp_s,
+                        LocalizationStatusName(r.status), r.markers_used, r.keypoints_used, r.rms_px,
+                        r.position_sigma_mm, t.detection_ms,
                         t.keypoints_ms, t.matching_ms, t.pnp_ms, t.refinement_ms, t.total_ms);
   }
   WriteTrajectory(out_path, poses,

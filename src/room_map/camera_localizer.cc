@@ -7,6 +7,7 @@
 #include <limits>
 #include <sstream>
 
+#include <Eigen/Eigenvalues>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -52,6 +53,7 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (!use_markers && !use_keypoints) out << "at least one of markers and keypoints must be used";
   else if (!(window_margin_px >= 0) || !(window_margin_fraction >= 0)) out << "window margins must not be negative";
   else if (!(marker_corner_sigma_px > 0) || !(keypoint_sigma_px > 0)) out << "pixel sigmas must be positive";
+  else if (!(marker_support_side_px > 0)) out << "marker_support_side_px must be positive";
   else if (!(depth_sigma_const_m >= 0 && depth_sigma_quad_per_m >= 0 && depth_sigma_const_m + depth_sigma_quad_per_m > 0))
     out << "depth sigmas must be non-negative and not both zero";
   else if (!(search_radius_px > 0) || !(refined_search_radius_px > 0)) out << "search radii must be positive";
@@ -64,6 +66,7 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
   else if (min_marker_corners < 4 || min_keypoints < 6) out << "min_marker_corners must be >= 4 and min_keypoints >= 6";
   else if (!(max_marker_rms_px > 0) || !(max_keypoint_rms_px > 0)) out << "RMS bounds must be positive";
+  else if (!(max_position_sigma_m > 0)) out << "max_position_sigma_m must be positive";
   return out.str();
 }
 
@@ -272,12 +275,20 @@ struct CameraLocalizer::Impl {
   void BuildCorrespondences() {
     corr.clear();
     corr.reserve(4 * markers.size() + keypoints.size());
+    double support = 0;
+    for (const auto& obs : markers) {
+      if (obs.status != MarkerStatus::kRefined) continue;
+      const double r = obs.MeanSidePx() / options.marker_support_side_px;
+      support += r * r;
+    }
+    const double keypoint_sigma = options.keypoint_sigma_px * std::sqrt(1 + support);
     for (size_t m = 0; m < markers.size(); ++m) {
       const RoomMapMarkerEntry* entry = map.FindMarker(markers[m].id);
       const double floor = markers[m].status == MarkerStatus::kRefined ? options.marker_corner_sigma_px
                                                                        : 4 * options.marker_corner_sigma_px;
       for (int c = 0; c < 4; ++c) {
-        corr.Add(entry->corners_in_room[c], marker_px[m][c], std::max(floor, markers[m].corner_sigma_px[c]),
+        corr.Add(entry->corners_in_room[c], marker_px[m][c],
+                 MarkerCornerSigmaPx(markers[m], c, floor, options.marker_reference_cell_px),
                  CorrespondenceGroup::kMarker, static_cast<int>(m) * 4 + c);
       }
     }
@@ -286,7 +297,7 @@ struct CameraLocalizer::Impl {
       if (l < 0) continue;
       const float z = keypoints.depth_m[i];
       const bool depth = options.use_keypoint_depth && z > 0;
-      corr.Add(map.landmarks_in_room[l], keypoint_px[i], options.keypoint_sigma_px, CorrespondenceGroup::kKeypoint,
+      corr.Add(map.landmarks_in_room[l], keypoint_px[i], keypoint_sigma, CorrespondenceGroup::kKeypoint,
                static_cast<int>(i), depth ? z : 0.0, depth ? DepthSigma(z) : 0.0);
     }
   }
@@ -392,6 +403,14 @@ struct CameraLocalizer::Impl {
     out->rms_px = r.rms_px;
     out->marker_rms_px = r.marker_rms_px;
     out->keypoint_rms_px = r.keypoint_rms_px;
+    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(r.information);
+    if (ldlt.info() != Eigen::Success || !(r.information.diagonal().array() > 0).all()) return false;
+    const Eigen::Matrix<double, 6, 6> cov = ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pos(cov.bottomRightCorner<3, 3>());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rot(cov.topLeftCorner<3, 3>());
+    out->position_sigma_mm = 1000 * std::sqrt(std::max(0.0, pos.eigenvalues().maxCoeff()));
+    out->rotation_sigma_deg = DegFromRad(std::sqrt(std::max(0.0, rot.eigenvalues().maxCoeff())));
+    if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     const bool by_markers = r.marker_inliers >= options.min_marker_corners && full >= 1 &&
                             r.marker_rms_px <= options.max_marker_rms_px;
     const bool by_keypoints =
@@ -486,7 +505,9 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   if (predicted) {
     std::optional<PosePrior> prior;
     if (options_.use_motion_prior) {
-      prior = PosePrior{*predicted, RadFromDeg(options_.motion_prior_sigma_deg), options_.motion_prior_sigma_m};
+      const double scale = std::max(1.0, std::abs(frame.timestamp_s - m.last_t) * 30.0);
+      prior = PosePrior{*predicted, scale * RadFromDeg(options_.motion_prior_sigma_deg),
+                        scale * options_.motion_prior_sigma_m};
     }
     refined = m.Track(*predicted, options_.search_radius_px, prior, &tm.matching_ms, &tm.refinement_ms, &mark);
     ok = m.Accept(refined, &out);

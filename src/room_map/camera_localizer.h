@@ -67,7 +67,14 @@ struct CameraLocalizerOptions {
   /// Pixel noise (1 sigma) of marker corners (floor; the edge fit's own sigma
   /// is used when larger) and of keypoints.
   double marker_corner_sigma_px = 0.15;
+  /// Small projected marker cells are down-weighted (MarkerCornerSigmaPx).
+  double marker_reference_cell_px = 4.0;
   double keypoint_sigma_px = 1.0;
+  /// Keypoint landmarks carry correlated map errors (~1 px at the true pose
+  /// on simulated cases) that fully refined markers do not: with markers in
+  /// view keypoints are down-weighted, sigma * sqrt(1 + S) with
+  /// S = sum over markers of (mean side / marker_support_side_px)^2.
+  double marker_support_side_px = 15;
   /// Use measured depth at keypoints in the refinement, with
   /// sigma(z) = depth_sigma_const_m + depth_sigma_quad_per_m * z^2.
   bool use_keypoint_depth = true;
@@ -86,10 +93,12 @@ struct CameraLocalizerOptions {
   int ransac_iterations = 200;
   double ransac_threshold_px = 4.0;
 
-  /// Weak prior on the pose from the motion model (only while tracking).
+  /// Prior on the pose from the constant-velocity motion model (only while
+  /// tracking): sigmas for frames 1/30 s apart, growing in proportion to the
+  /// time since the last localised frame (the prediction gets worse).
   bool use_motion_prior = true;
-  double motion_prior_sigma_m = 0.05;
-  double motion_prior_sigma_deg = 5.0;
+  double motion_prior_sigma_m = 0.01;
+  double motion_prior_sigma_deg = 0.5;
   /// Tracking continues from the last pose for this many lost frames, then
   /// the next frame is relocalised from scratch.
   int max_frames_lost_before_relocalising = 3;
@@ -97,10 +106,13 @@ struct CameraLocalizerOptions {
   /// Acceptance: a frame is localised with at least this many inlier marker
   /// corners, or at least min_keypoints keypoint inliers ...
   int min_marker_corners = 4;
-  int min_keypoints = 15;
+  int min_keypoints = 20;
   /// ... and inlier RMS reprojection errors within these.
   double max_marker_rms_px = 1.5;
   double max_keypoint_rms_px = 2.5;
+  /// ... and the pose's own 1-sigma position uncertainty (from the
+  /// refinement's information matrix, camera axes, largest) below this (m).
+  double max_position_sigma_m = 0.02;
 
   std::string Validate() const;
   bool Check(std::string* reason = nullptr) const;
@@ -135,6 +147,10 @@ struct LocalizationResult {
   double rms_px = 0;         ///< RMS reprojection error over all inliers
   double marker_rms_px = 0;
   double keypoint_rms_px = 0;
+  /// 1-sigma position uncertainty of the camera (largest axis, mm) and
+  /// rotation uncertainty (deg) from the refinement's information matrix.
+  double position_sigma_mm = 0;
+  double rotation_sigma_deg = 0;
   std::string message;       ///< why, when lost
   LocalizationTimings timings;
   /// The room markers found in this frame (image pixels), for callers that

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <sstream>
 
+#include <opencv2/imgproc.hpp>
+
 #include "util/check.h"
 
 namespace arpos {
@@ -193,6 +195,20 @@ void KeypointExtractor::Extract(const cv::Mat& gray, const cv::Mat& depth, doubl
   }
   if (chosen.empty()) return;
   orb_->compute(gray, chosen, out->descriptors);
+  if (options_.subpixel && !chosen.empty()) {
+    // After the descriptors (computed about the integer corner, as in the map).
+    points_.resize(chosen.size());
+    for (size_t i = 0; i < chosen.size(); ++i) points_[i] = chosen[i].pt;
+    const int w = options_.subpixel_half_window_px;
+    cv::cornerSubPix(gray, points_, cv::Size(w, w), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.01));
+    for (size_t i = 0; i < chosen.size(); ++i) {
+      // A corner that wanders off is not a corner cornerSubPix can place: keep FAST's.
+      if (std::abs(points_[i].x - chosen[i].pt.x) < 1.0f && std::abs(points_[i].y - chosen[i].pt.y) < 1.0f) {
+        chosen[i].pt = points_[i];
+      }
+    }
+  }
   out->depth_m.resize(chosen.size());
   for (size_t i = 0; i < chosen.size(); ++i) {
     out->depth_m[i] = SmoothDepthAt(depth, cvRound(chosen[i].pt.x), cvRound(chosen[i].pt.y),

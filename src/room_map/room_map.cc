@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 #include "features/marker_pose.h"
@@ -50,6 +51,18 @@ std::array<Eigen::Vector3d, 4> MarkerCornersInRoom(const Rigid3d& room_from_mark
   std::array<Eigen::Vector3d, 4> corners = MarkerCornersInMarker(marker_size_m);
   for (auto& c : corners) c = room_from_marker * c;
   return corners;
+}
+
+double MarkerCornerSigmaPx(const MarkerObservation& observation, int corner, double floor_px,
+                           double reference_cell_px, int cells_per_side) {
+  double shortest = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 4; ++k) {
+    shortest = std::min(shortest, (observation.corners_px[(k + 1) % 4] - observation.corners_px[k]).norm());
+  }
+  const double cell = std::max(1e-3, shortest / cells_per_side);
+  const double base = std::max(floor_px, observation.corner_sigma_px[corner]);
+  const double ratio = reference_cell_px / cell;
+  return base * (1 + ratio * ratio);
 }
 
 RoomMapRecord ToRecord(const RoomMap& map, PlanId plan, std::optional<RecordingId> recording) {

@@ -125,8 +125,10 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (max_frames < 0) out << "max_frames must not be negative";
   else if (threads < 1) out << "threads must be at least 1";
   else if (!(marker_corner_sigma_px > 0) || !(keypoint_sigma_px > 0)) out << "sigmas must be positive";
+  else if (!(marker_reference_cell_px >= 0)) out << "marker_reference_cell_px must not be negative";
   else if (!(max_marker_view_rms_px > 0)) out << "max_marker_view_rms_px must be positive";
   else if (marker_depth_samples < 0) out << "marker_depth_samples must not be negative";
+  else if (min_marker_observations < 1) out << "min_marker_observations must be at least 1";
   else if (!(association_radius_px > 0)) out << "association_radius_px must be positive";
   else if (max_hamming < 1 || max_hamming > 256) out << "max_hamming must be in 1..256";
   else if (min_landmark_observations < 2) out << "min_landmark_observations must be at least 2";
@@ -160,6 +162,11 @@ std::string RoomMapBuildReport::ToText() const {
   if (!unconnected_markers.empty()) {
     out << "markers not connected to the origin (left out):";
     for (int id : unconnected_markers) out << " " << id;
+    out << "\n";
+  }
+  if (!sparse_markers.empty()) {
+    out << "markers seen in too few views (left out):";
+    for (int id : sparse_markers) out << " " << id;
     out << "\n";
   }
   out << StringPrintf("landmarks: %d kept of %d candidates (%d in exclusion boxes), %d observations\n",
@@ -379,7 +386,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         o.marker = it->second;
         o.corners_px = f.markers[m].corners_px;
         for (int k = 0; k < 4; ++k) {
-          o.sigma_px[k] = std::max(options.marker_corner_sigma_px, f.markers[m].corner_sigma_px[k]);
+          o.sigma_px[k] = MarkerCornerSigmaPx(f.markers[m], k, options.marker_corner_sigma_px,
+                                              options.marker_reference_cell_px);
         }
         o.depth_samples = f.depth_samples[m];
         ba.marker_observations.push_back(std::move(o));
@@ -677,7 +685,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     std::vector<BaMarkerObservation> kept_markers;
     for (size_t i = 0; i < ba.marker_observations.size(); ++i) {
-      if (res.marker_rms_px[i] < std::max(1.0, options.outlier_sigmas * options.marker_corner_sigma_px * 2.5)) {
+      const auto& o = ba.marker_observations[i];
+      const double sigma = *std::max_element(o.sigma_px.begin(), o.sigma_px.end());
+      if (res.marker_rms_px[i] < std::max(0.5, options.outlier_sigmas * sigma)) {
         kept_markers.push_back(ba.marker_observations[i]);
       }
     }
@@ -739,6 +749,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   int mean_n = 0;
   for (size_t m = 0; m < marker_ids.size(); ++m) {
     if (n_obs[m] == 0) continue;  // every observation rejected: not trustworthy
+    if (n_obs[m] < options.min_marker_observations && marker_ids[m] != origin_id) {
+      report.sparse_markers.push_back(marker_ids[m]);
+      continue;
+    }
     RoomMapMarkerEntry e;
     e.id = marker_ids[m];
     e.room_from_marker = ba.room_from_marker[m];
@@ -779,6 +793,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
       if (!d.empty()) std::copy_n(d[best], kDescriptorBytes, map.landmark_descriptors.ptr<std::uint8_t>(static_cast<int>(l)));
     }
+  }
+  if (!report.sparse_markers.empty()) {
+    report.warnings.push_back(StringPrintf("%zu marker(s) seen in fewer than %d views; left out of the map",
+                                           report.sparse_markers.size(), options.min_marker_observations));
   }
   report.landmarks = map.num_landmarks();
   report.keypoint_observations = static_cast<int>(ba.keypoint_observations.size());

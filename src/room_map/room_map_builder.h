@@ -73,9 +73,15 @@ struct RoomMapBuildOptions {
 
   /// Corner noise floor (px): the edge fits' own sigma is used when larger.
   double marker_corner_sigma_px = 0.1;
+  /// Corners of markers with small projected cells are down-weighted (see
+  /// MarkerCornerSigmaPx); 0 disables.
+  double marker_reference_cell_px = 4.0;
   /// Only markers whose corners refined fully (MarkerStatus::kRefined) are
   /// used; single-view poses must also pass this reprojection RMS (px).
   double max_marker_view_rms_px = 2.0;
+  /// Markers seen in fewer views are left out of the map (a marker seen once
+  /// fits its one view exactly but its pose is poorly determined: ~1 cm).
+  int min_marker_observations = 3;
   /// Depth samples kept per marker view for the plane term and scale check.
   int marker_depth_samples = 16;
 
@@ -112,6 +118,7 @@ struct RoomMapBuildReport {
   int marker_views = 0;
   int ambiguous_marker_views = 0;  ///< single-view poses rejected (ambiguous / depth mismatch)
   std::vector<int> unconnected_markers;  ///< seen but not linked to the origin: not in the map
+  std::vector<int> sparse_markers;       ///< seen in too few views: not in the map
   int landmark_candidates = 0;
   int landmarks_excluded = 0;   ///< inside an exclusion box
   int landmarks = 0;

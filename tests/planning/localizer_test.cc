@@ -1,0 +1,178 @@
+// Camera localisation against the small case's map, and the CLI commands.
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "geometry/pose_error.h"
+#include "planning/planning_test_util.h"
+#include "room_map/camera_localizer.h"
+#include "room_map/plan_stage.h"
+#include "sensor/sequence.h"
+#include "sensor/tum_io.h"
+#include "util/file.h"
+
+namespace arpos {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::GetSmallCase;
+using testing::GetSmallCaseMap;
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr
+};
+
+CommandResult RunArpos(const std::string& arguments) {
+  CommandResult r;
+  const std::string command = std::string(ARPOS_EXECUTABLE) + " " + arguments + " 2>&1";
+  FILE* pipe = popen(command.c_str(), "r");
+  if (pipe == nullptr) return r;
+  std::array<char, 4096> buffer;
+  size_t n;
+  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) r.output.append(buffer.data(), n);
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+TEST(Localizer, TrackingFramesWithinTolerance) {
+  const auto& c = GetSmallCase();
+  const RoomMap& map = GetSmallCaseMap().map;
+  CameraLocalizer localizer(map, c.folder.config.camera, MakeCameraLocalizerOptions(c.folder.config));
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  double sum_mm = 0, sum_deg = 0;
+  int ok = 0;
+  for (size_t i = 0; i < seq.size(); ++i) {
+    const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+    ASSERT_TRUE(r.ok) << name << " frame " << i << ": " << r.message;
+    EXPECT_EQ(r.status, i == 0 ? LocalizationStatus::kRelocalized : LocalizationStatus::kTracked) << "frame " << i;
+    const PoseError e = ComputePoseError(gt[i].room_from_x, r.room_from_camera);
+    // Per-frame tolerance on this small map (30 room frames): 6 mm, 0.3 deg.
+    EXPECT_LT(e.translation_mm, 6.0) << "frame " << i;
+    EXPECT_LT(e.rotation_deg, 0.3) << "frame " << i;
+    sum_mm += e.translation_mm;
+    sum_deg += e.rotation_deg;
+    ++ok;
+    EXPECT_GT(r.markers_used + r.keypoints_used, 0);
+    EXPECT_GT(r.timings.total_ms, 0);
+  }
+  EXPECT_LT(sum_mm / ok, 3.0);
+  EXPECT_LT(sum_deg / ok, 0.15);
+}
+
+TEST(Localizer, FrameWithoutMarkersOrTextureIsLostAndTrackingRecovers) {
+  const auto& c = GetSmallCase();
+  const CameraIntrinsics& K = c.folder.config.camera;
+  CameraLocalizer localizer(GetSmallCaseMap().map, K, MakeCameraLocalizerOptions(c.folder.config));
+  const Sequence seq = Sequence::Open(c.folder.tracking.at(0).second);
+  const auto gt = *seq.CameraGroundTruth();
+  ASSERT_TRUE(localizer.Localize(seq.LoadFrame(0, K)).ok);
+  ASSERT_TRUE(localizer.Localize(seq.LoadFrame(1, K)).ok);
+  // A blank grey frame with no depth: nothing to localise from. It must be
+  // reported lost, not filled in from the motion model.
+  RgbdFrame blank;
+  blank.index = 2;
+  blank.timestamp_s = seq.timestamp_s(2);
+  blank.color = cv::Mat(K.height, K.width, CV_8UC3, cv::Scalar(128, 128, 128));
+  blank.depth = cv::Mat::zeros(K.height, K.width, CV_16UC1);
+  blank.depth_scale = K.depth_scale;
+  const LocalizationResult lost = localizer.Localize(blank);
+  EXPECT_FALSE(lost.ok);
+  EXPECT_EQ(lost.status, LocalizationStatus::kLost);
+  EXPECT_EQ(lost.markers_used, 0);
+  EXPECT_EQ(lost.keypoints_used, 0);
+  EXPECT_FALSE(lost.message.empty());
+  // Next real frames are localised again.
+  for (size_t i = 3; i < std::min<size_t>(seq.size(), 6); ++i) {
+    const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, K));
+    ASSERT_TRUE(r.ok) << "frame " << i << ": " << r.message;
+    EXPECT_LT(ComputePoseError(gt[i].room_from_x, r.room_from_camera).translation_mm, 6.0);
+  }
+  // After Reset() the next frame is relocalised from scratch.
+  localizer.Reset();
+  const LocalizationResult again = localizer.Localize(seq.LoadFrame(6, K));
+  ASSERT_TRUE(again.ok);
+  EXPECT_EQ(again.status, LocalizationStatus::kRelocalized);
+}
+
+TEST(Localizer, AcceptsDetectionsFromTheCaller) {
+  const auto& c = GetSmallCase();
+  const CameraIntrinsics& K = c.folder.config.camera;
+  CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+  options.use_keypoints = false;  // markers only: the given detections must be used
+  CameraLocalizer with_given(GetSmallCaseMap().map, K, options);
+  CameraLocalizer with_own(GetSmallCaseMap().map, K, options);
+  const Sequence seq = Sequence::Open(c.folder.tracking.at(0).second);
+  const RgbdFrame frame = seq.LoadFrame(0, K);
+  const LocalizationResult own = with_own.Localize(frame);
+  if (!own.ok) GTEST_SKIP() << "first tracking frame has no usable room marker";
+  const LocalizationResult given = with_given.Localize(frame, own.markers);
+  ASSERT_TRUE(given.ok);
+  EXPECT_TRUE(given.room_from_camera.IsApprox(own.room_from_camera, 1e-9, 1e-9));
+  EXPECT_EQ(given.timings.detection_ms < own.timings.detection_ms, true);
+  // No detections and no keypoints: lost.
+  CameraLocalizer empty(GetSmallCaseMap().map, K, options);
+  EXPECT_FALSE(empty.Localize(frame, {}).ok);
+}
+
+TEST(Localizer, RejectsFramesOfTheWrongSize) {
+  const auto& c = GetSmallCase();
+  CameraLocalizer localizer(GetSmallCaseMap().map, c.folder.config.camera,
+                            MakeCameraLocalizerOptions(c.folder.config));
+  RgbdFrame frame;
+  frame.color = cv::Mat(10, 10, CV_8UC3, cv::Scalar(0, 0, 0));
+  EXPECT_THROW(localizer.Localize(frame), Error);
+}
+
+TEST(PlanningCli, PlanThenLocalizeWritesOnePosePerLocalisedFrame) {
+  const auto& c = GetSmallCase();
+  TempDir dir("arpos_planning_cli");
+  const fs::path store = dir.path() / "store.db";
+  const fs::path out = dir.path() / "poses.txt";
+  const fs::path seq_dir = c.folder.tracking.at(0).second;
+  // No store yet: localize refuses (it never creates one) and says so.
+  CommandResult r = RunArpos("localize " + seq_dir.string() + " --store " + store.string() + " --out " + out.string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("store"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(store));
+  r = RunArpos("plan " + c.root.string() + " --store " + store.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("room map"), std::string::npos);
+  r = RunArpos("localize " + seq_dir.string() + " --store " + store.string() + " --out " + out.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto poses = ReadTrajectory(out);
+  const auto gt = *Sequence::Open(seq_dir).CameraGroundTruth();
+  EXPECT_EQ(poses.size(), gt.size()) << r.output;
+  std::vector<double> gt_t, est_t;
+  for (const auto& p : gt) gt_t.push_back(p.timestamp_s);
+  for (const auto& p : poses) est_t.push_back(p.timestamp_s);
+  const auto pairs = AssociateTimestamps(gt_t, est_t, 1e-4);
+  EXPECT_EQ(pairs.size(), poses.size());
+  for (const auto& [i, j] : pairs) {
+    EXPECT_LT(ComputePoseError(gt[i].room_from_x, poses[j].room_from_x).translation_mm, 6.0);
+  }
+}
+
+TEST(PlanningCli, LocalizeWithoutARoomMapIsAClearError) {
+  const auto& c = GetSmallCase();
+  TempDir dir("arpos_planning_cli_empty");
+  const fs::path store = dir.path() / "empty.db";
+  // Make an empty store through the store command's open path.
+  CommandResult r = RunArpos("plan " + (dir.path() / "no_such_case").string() + " --store " + store.string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  ASSERT_TRUE(fs::exists(store)) << r.output;
+  r = RunArpos("localize " + c.folder.tracking.at(0).second.string() + " --store " + store.string() + " --out " +
+               (dir.path() / "x.txt").string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("no room map"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir.path() / "x.txt"));
+}
+
+}  // namespace
+}  // namespace arpos

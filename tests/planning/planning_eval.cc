@@ -1,0 +1,187 @@
+// planning_eval: accuracy of the room map and of camera localisation on a
+// simulated case (not a test; prints a report).
+//
+//   planning_eval CASE_DIR [--frame-step N] [--no-keypoints] [--json]
+//
+// Builds the map from CASE_DIR/room (as `arpos plan` does, without a store),
+// compares every mapped marker with simulation.yaml (corner errors, mm), then
+// localises every sequence (room, body_scan, tracking/*) and evaluates it
+// against groundtruth.txt exactly as `arpos evaluate` does (MTE/MRE, lost).
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <iostream>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "eval/trajectory_eval.h"
+#include "geometry/umeyama.h"
+#include "room_map/camera_localizer.h"
+#include "room_map/plan_stage.h"
+#include "sensor/case_folder.h"
+#include "sensor/sequence.h"
+#include "store/sqlite_database.h"
+#include "simulation/simulation_truth.h"
+#include "util/check.h"
+#include "util/string_util.h"
+
+using namespace arpos;
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "usage: planning_eval CASE_DIR [--frame-step N] [--no-keypoints] [--loc-no-keypoints]\n");
+    return 2;
+  }
+  try {
+    const std::filesystem::path case_dir = argv[1];
+    RoomMapStageOptions stage;
+    bool loc_keypoints = true, marker_depth = true, keypoint_depth = true, linearize = true;
+    double corner_sigma = -1, prior_m = -1, prior_deg = -1, kp_sigma = -1;
+    int min_kp = -1;
+    double depth_quad = -1, depth_const = -1;
+    std::string store, only;
+    for (int i = 2; i < argc; ++i) {
+      if (!std::strcmp(argv[i], "--no-marker-depth")) marker_depth = false;
+      if (!std::strcmp(argv[i], "--no-keypoint-depth")) keypoint_depth = false;
+      if (!std::strcmp(argv[i], "--no-linearize")) linearize = false;
+      if (!std::strcmp(argv[i], "--corner-sigma") && i + 1 < argc) corner_sigma = std::atof(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--prior-m") && i + 1 < argc) prior_m = std::atof(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--prior-deg") && i + 1 < argc) prior_deg = std::atof(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--kp-sigma") && i + 1 < argc) kp_sigma = std::atof(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--min-kp") && i + 1 < argc) min_kp = std::atoi(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--depth-quad") && i + 1 < argc) depth_quad = std::atof(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--depth-const") && i + 1 < argc) depth_const = std::atof(argv[i + 1]);
+      if (!std::strcmp(argv[i], "--store") && i + 1 < argc) store = argv[i + 1];
+      if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[i + 1];
+      if (!std::strcmp(argv[i], "--frame-step") && i + 1 < argc) stage.frame_step = std::atoi(argv[++i]);
+      else if (!std::strcmp(argv[i], "--no-keypoints")) stage.use_keypoints = false;
+      else if (!std::strcmp(argv[i], "--loc-no-keypoints")) loc_keypoints = false;
+    }
+    const CaseFolder folder = LoadCaseFolder(case_dir);
+    const Sequence room = Sequence::Open(folder.room_dir);
+    RoomMapBuildOptions build_options = MakeRoomMapBuildOptions(folder, stage);
+    build_options.bundle_adjustment.use_marker_depth = marker_depth;
+    build_options.bundle_adjustment.use_keypoint_depth = keypoint_depth;
+    build_options.linearize_srgb = linearize;
+    if (corner_sigma > 0) build_options.marker_corner_sigma_px = corner_sigma;
+    if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
+    if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
+    RoomMapBuildResult build;
+    if (!store.empty()) {
+      auto db = SqliteDatabase::Open(store);
+      build.map = LoadRoomMapForLocalization(db.get(), std::nullopt, "");
+    } else {
+      build = BuildRoomMap(room, folder.config, build_options);
+    }
+    std::cout << build.report.ToText();
+
+    // Markers against the truth.
+    const sim::SimulationTruth truth = sim::LoadSimulationTruth(case_dir / "simulation.yaml");
+    double sum = 0, worst = 0;
+    int n = 0;
+    std::cout << "marker  corner error mean/max (mm)  centre error (mm)  views\n";
+    for (const auto& m : build.map.markers) {
+      for (const auto& t : truth.room_markers) {
+        if (t.id != m.id) continue;
+        double e_sum = 0, e_max = 0;
+        for (int c = 0; c < 4; ++c) {
+          const double e = (m.corners_in_room[c] - t.corners_m[c]).norm() * 1000;
+          e_sum += e;
+          e_max = std::max(e_max, e);
+          sum += e;
+          ++n;
+          worst = std::max(worst, e);
+        }
+        const double centre = (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000;
+        std::cout << StringPrintf("  %3d   %6.3f / %6.3f           %6.3f           %d\n", m.id, e_sum / 4, e_max,
+                                  centre, m.num_observations);
+      }
+    }
+    std::cout << StringPrintf("markers mapped: %zu of %zu; corner error mean %.3f mm, max %.3f mm\n",
+                              build.map.markers.size(), truth.room_markers.size(), n ? sum / n : 0.0, worst);
+    {
+      // Internal consistency: the map's corners after the best rigid fit to the truth.
+      std::vector<Eigen::Vector3d> est, tru;
+      for (const auto& m : build.map.markers) {
+        for (const auto& t : truth.room_markers) {
+          if (t.id != m.id) continue;
+          for (int c = 0; c < 4; ++c) {
+            est.push_back(m.corners_in_room[c]);
+            tru.push_back(t.corners_m[c]);
+          }
+        }
+      }
+      const auto sim3 = EstimateRigidTransform(est, tru, true);
+      if (sim3) std::cout << StringPrintf("similarity fit: scale %.5f, rmse %.3f mm\n", sim3->scale, sim3->rmse_m * 1000);
+      const auto fit = EstimateRigidTransform(est, tru);
+      if (fit) {
+        double s2 = 0, mx = 0;
+        for (size_t i = 0; i < est.size(); ++i) {
+          const double e = (fit->target_from_source * est[i] - tru[i]).norm() * 1000;
+          s2 += e;
+          mx = std::max(mx, e);
+        }
+        std::cout << StringPrintf("after a rigid fit to the truth: corner error mean %.3f mm, max %.3f mm; frame offset %s\n",
+                                  s2 / est.size(), mx, fit->target_from_source.ToString().c_str());
+      }
+    }
+    if (store.empty()) {
+      // The room frames' own poses from the adjustment.
+      std::vector<StampedPose> est;
+      for (const auto& [index, pose] : build.report.room_from_camera) est.push_back({room.timestamp_s(index), pose});
+      const TrajectoryEvaluation e = EvaluateTrajectory(*room.CameraGroundTruth(), est);
+      std::cout << StringPrintf("room frames (bundle adjusted): MTE %.3f mm, MRE %.4f deg, max %.3f mm, lost %.1f %%\n",
+                                e.translation_mm.mean, e.rotation_deg.mean, e.translation_mm.max, e.lost_percent);
+    }
+
+    // Localisation of every sequence.
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(folder.config);
+    options.use_keypoints = loc_keypoints;
+    options.linearize_srgb = linearize;
+    if (std::getenv("NO_LOC")) return 0;
+    if (prior_m > 0) options.motion_prior_sigma_m = prior_m;
+    if (prior_deg > 0) options.motion_prior_sigma_deg = prior_deg;
+    if (kp_sigma > 0) options.keypoint_sigma_px = kp_sigma;
+    if (min_kp > 0) options.min_keypoints = min_kp;
+    if (const char* v = std::getenv("SUPPORT_PX")) options.marker_support_side_px = std::atof(v);
+    if (const char* v = std::getenv("CORNER_FLOOR")) options.marker_corner_sigma_px = std::atof(v);
+    if (depth_quad >= 0) options.depth_sigma_quad_per_m = depth_quad;
+    if (depth_const >= 0) options.depth_sigma_const_m = depth_const;
+    std::vector<std::pair<std::string, std::filesystem::path>> sequences = {{"room", folder.room_dir},
+                                                                           {"body_scan", folder.body_scan_dir}};
+    for (const auto& t : folder.tracking) sequences.push_back({"tracking/" + t.first, t.second});
+    std::cout << "sequence           frames  localised   MTE mm  median  p95     max     MRE deg  ms/frame(CPU)\n";
+    for (const auto& [name, dir] : sequences) {
+      if (!std::filesystem::is_directory(dir)) continue;
+      if (!only.empty() && name.find(only) == std::string::npos) continue;
+      const Sequence seq = Sequence::Open(dir);
+      CameraLocalizer localizer(build.map, folder.config.camera, options);
+      std::vector<StampedPose> est;
+      double ms = 0;
+      LocalizationTimings sum_t;
+      for (size_t i = 0; i < seq.size(); ++i) {
+        const RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
+        const LocalizationResult r = localizer.Localize(frame);
+        if (r.ok) est.push_back({frame.timestamp_s, r.room_from_camera});
+        ms += r.timings.total_ms;
+        sum_t.detection_ms += r.timings.detection_ms;
+        sum_t.keypoints_ms += r.timings.keypoints_ms;
+        sum_t.matching_ms += r.timings.matching_ms;
+        sum_t.pnp_ms += r.timings.pnp_ms;
+        sum_t.refinement_ms += r.timings.refinement_ms;
+      }
+      const TrajectoryEvaluation e = EvaluateTrajectory(*seq.CameraGroundTruth(), est);
+      const double k = seq.size() ? 1.0 / seq.size() : 0;
+      std::cout << StringPrintf("%-18s %5zu   %6.1f %%  %7.3f %7.3f %7.3f %7.3f  %7.4f   %.2f (det %.2f kp %.2f match %.2f pnp %.2f ref %.2f)\n",
+                                name.c_str(), seq.size(), 100.0 - e.lost_percent, e.translation_mm.mean,
+                                e.translation_mm.median, e.translation_mm.p95, e.translation_mm.max,
+                                e.rotation_deg.mean, ms * k, sum_t.detection_ms * k, sum_t.keypoints_ms * k,
+                                sum_t.matching_ms * k, sum_t.pnp_ms * k, sum_t.refinement_ms * k);
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "planning_eval: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,44 @@
+#pragma once
+// Shared fixtures for the planning tests and benchmark: a small simulated
+// case written once per process into a temporary folder, and its room map.
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "room_map/room_map_builder.h"
+#include "sensor/case_folder.h"
+#include "simulation/simulation_truth.h"
+
+namespace arpos::testing {
+
+struct SmallCase {
+  std::filesystem::path root;     ///< the case folder
+  CaseFolder folder;
+  sim::SimulationTruth truth;
+};
+
+/// A case simulated with seed 7: `room_frames` frames spread over the room
+/// walk and, as tracking/seq_00, `tracking_frames` consecutive frames
+/// (15-30 fps) of either the room walk between the mapped frames
+/// (`tracking_from_room`: views the small map covers) or the simulator's
+/// first tracking sequence (patient present); body_scan/ is absent. The same
+/// arguments give the same case (cached per process; written on first use,
+/// ~15-30 s).
+const SmallCase& GetSmallCase(const std::string& profile = "xtion", int room_frames = 40,
+                              int tracking_frames = 12, bool tracking_from_room = true);
+
+/// The map of GetSmallCase(profile, ...) built with the default stage options
+/// (cached per process).
+const RoomMapBuildResult& GetSmallCaseMap(const std::string& profile = "xtion", int room_frames = 40,
+                                          int tracking_frames = 12, bool tracking_from_room = true);
+
+/// Mean / max corner error (m) of the mapped markers against the truth, over
+/// markers with at least `min_views` observations.
+struct MarkerErrors {
+  double mean_m = 0, max_m = 0;
+  int markers = 0;
+};
+MarkerErrors CompareMarkers(const RoomMap& map, const sim::SimulationTruth& truth, int min_views = 1);
+
+}  // namespace arpos::testing

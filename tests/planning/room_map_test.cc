@@ -1,0 +1,190 @@
+// Room map building on a small simulated case (tests/planning/planning_test_util.h).
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "planning/planning_test_util.h"
+#include "room_map/plan_stage.h"
+#include "sensor/sequence.h"
+#include "sensor/tum_io.h"
+#include "store/sqlite_database.h"
+#include "util/file.h"
+
+namespace arpos {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::CompareMarkers;
+using testing::GetSmallCase;
+using testing::GetSmallCaseMap;
+
+TEST(RoomMap, MarkerCornersAreNearTheTruth) {
+  const auto& c = GetSmallCase();
+  const RoomMapBuildResult& built = GetSmallCaseMap();
+  const RoomMap& map = built.map;
+  // Most of the room's markers are mapped (some are seen once or never).
+  EXPECT_GE(map.markers.size(), 8u) << built.report.ToText();
+  // Tolerance: markers seen at least 3 times within 5 mm at every corner and
+  // 2 mm on average; all mapped markers within 15 mm.
+  const auto well_seen = CompareMarkers(map, c.truth, 3);
+  EXPECT_GE(well_seen.markers, 6);
+  EXPECT_LT(well_seen.mean_m, 0.002) << built.report.ToText();
+  EXPECT_LT(well_seen.max_m, 0.005);
+  EXPECT_LT(CompareMarkers(map, c.truth, 1).max_m, 0.015);
+  // Residuals and the depth scale check are reported and plausible.
+  EXPECT_GT(map.mean_residual_px, 0.0);
+  EXPECT_LT(map.mean_residual_px, 0.3);
+  EXPECT_GE(map.max_residual_px, map.mean_residual_px);
+  EXPECT_NEAR(built.report.depth_scale_ratio, 1.0, 0.01);
+  // A keypoint layer of a few thousand landmarks at most, with descriptors.
+  EXPECT_GT(map.num_landmarks(), 200);
+  EXPECT_LE(map.num_landmarks(), 4000);
+  EXPECT_EQ(map.landmark_descriptors.rows, map.num_landmarks());
+  EXPECT_EQ(map.landmark_descriptors.cols, kDescriptorBytes);
+}
+
+TEST(RoomMap, OriginMarkerFixesTheRoomFrame) {
+  const auto& c = GetSmallCase();
+  const RoomMap& map = GetSmallCaseMap().map;
+  const RoomMapMarkerEntry* origin = map.FindMarker(c.folder.config.room_origin_id);
+  ASSERT_NE(origin, nullptr);
+  EXPECT_TRUE(origin->room_from_marker.IsApprox(Rigid3d::Identity(), 1e-12, 1e-12));
+
+  // Another marker as origin: the same map, re-expressed in that marker's frame.
+  const RoomMapMarkerEntry* other = nullptr;
+  for (const auto& m : map.markers) {
+    if (m.id != origin->id && m.num_observations >= 5 && (!other || m.num_observations > other->num_observations)) {
+      other = &m;
+    }
+  }
+  ASSERT_NE(other, nullptr);
+  CaseConfig config = c.folder.config;
+  config.room_origin_id = other->id;
+  RoomMapStageOptions stage;
+  stage.use_keypoints = false;  // markers decide the frame; keep the test quick
+  RoomMapBuildOptions options = MakeRoomMapBuildOptions(c.folder, stage);
+  const RoomMap moved = BuildRoomMap(Sequence::Open(c.folder.room_dir), config, options).map;
+  ASSERT_NE(moved.FindMarker(other->id), nullptr);
+  EXPECT_TRUE(moved.FindMarker(other->id)->room_from_marker.IsApprox(Rigid3d::Identity(), 1e-12, 1e-12));
+  // old_room_from_new_room = the new origin's pose in the first map.
+  const Rigid3d first_from_second = other->room_from_marker;
+  for (const auto& m : moved.markers) {
+    const RoomMapMarkerEntry* in_first = map.FindMarker(m.id);
+    if (in_first == nullptr || m.num_observations < 3) continue;
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_LT((first_from_second * m.corners_in_room[k] - in_first->corners_in_room[k]).norm(), 0.006)
+          << "marker " << m.id;
+    }
+  }
+}
+
+TEST(RoomMap, RecordRoundTripKeepsMarkersAndLandmarks) {
+  const RoomMap& map = GetSmallCaseMap().map;
+  const RoomMapRecord record = ToRecord(map, PlanId(3));
+  EXPECT_EQ(record.plan_id, PlanId(3));
+  const RoomMap back = FromRecord(record);
+  ASSERT_EQ(back.markers.size(), map.markers.size());
+  for (size_t i = 0; i < map.markers.size(); ++i) {
+    EXPECT_EQ(back.markers[i].id, map.markers[i].id);
+    EXPECT_TRUE(back.markers[i].room_from_marker.IsApprox(map.markers[i].room_from_marker, 1e-9, 1e-9));
+  }
+  ASSERT_EQ(back.num_landmarks(), map.num_landmarks());
+  for (int i = 0; i < map.num_landmarks(); ++i) {
+    EXPECT_LT((back.landmarks_in_room[i] - map.landmarks_in_room[i]).norm(), 1e-6);  // stored as float
+  }
+  EXPECT_EQ(cv::norm(back.landmark_descriptors, map.landmark_descriptors, cv::NORM_HAMMING), 0);
+}
+
+TEST(RoomMap, OriginNeverSeenIsAClearError) {
+  const auto& c = GetSmallCase();
+  int absent = -1;
+  for (int id = c.folder.config.room_markers.id_max; id >= c.folder.config.room_markers.id_min && absent < 0; --id) {
+    bool placed = false;
+    for (const auto& m : c.truth.room_markers) placed |= m.id == id;
+    if (!placed) absent = id;
+  }
+  ASSERT_GE(absent, 0);
+  CaseConfig config = c.folder.config;
+  config.room_origin_id = absent;
+  RoomMapStageOptions stage;
+  stage.use_keypoints = false;
+  try {
+    BuildRoomMap(Sequence::Open(c.folder.room_dir), config, MakeRoomMapBuildOptions(c.folder, stage));
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("origin marker (id " + std::to_string(absent)), std::string::npos) << what;
+    EXPECT_NE(what.find("never seen"), std::string::npos) << what;
+    EXPECT_NE(what.find("room"), std::string::npos) << what;
+  }
+}
+
+TEST(RoomMap, CorruptFrameErrorNamesTheFile) {
+  const auto& c = GetSmallCase();
+  TempDir dir("arpos_planning_corrupt");
+  const fs::path case_copy = dir.path() / "case";
+  fs::create_directories(case_copy);
+  fs::copy(c.root / "case.yaml", case_copy / "case.yaml");
+  fs::copy(c.folder.room_dir, case_copy / "room", fs::copy_options::recursive);
+  const Sequence room = Sequence::Open(case_copy / "room");
+  const fs::path broken = room.color_path(room.size() / 2);
+  {
+    std::ofstream out(broken, std::ios::binary | std::ios::trunc);
+    out << "this is not a PNG";
+  }
+  try {
+    BuildRoomMap(room, c.folder.config, MakeRoomMapBuildOptions(c.folder.config));
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(broken.filename().string()), std::string::npos) << e.what();
+  }
+}
+
+TEST(RoomMap, PlanStageStoresTheMapAndCreatesThePlanOnce) {
+  const auto& c = GetSmallCase();
+  auto db = SqliteDatabase::Open(":memory:");
+  // Nothing stored yet: localisation has no map to use.
+  try {
+    LoadRoomMapForLocalization(db.get(), std::nullopt, "");
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no room map"), std::string::npos) << e.what();
+  }
+  PlanRoomMapOptions options;
+  options.case_dir = c.root;
+  options.stage.use_keypoints = false;  // quick; the keypoint layer is tested above
+  const PlanRoomMapResult first = RunPlanRoomMap(options, db.get());
+  EXPECT_TRUE(first.created_plan);
+  ASSERT_TRUE(db->FindPatient(CasePatientId(c.root)));
+  const auto record = db->GetRoomMap(first.room_map_id);
+  ASSERT_TRUE(record);
+  EXPECT_EQ(record->plan_id, first.plan_id);
+  EXPECT_EQ(record->origin_marker_id, c.folder.config.room_origin_id);
+  EXPECT_EQ(record->markers.size(), first.build.map.markers.size());
+  EXPECT_GT(record->mean_residual_px, 0);
+  for (const auto& m : record->markers) EXPECT_GT(m.num_observations, 0);
+  // A second run files the map under the same plan.
+  const PlanRoomMapResult second = RunPlanRoomMap(options, db.get());
+  EXPECT_FALSE(second.created_plan);
+  EXPECT_EQ(second.plan_id, first.plan_id);
+  PlanId used;
+  RoomMapId used_map;
+  const RoomMap loaded = LoadRoomMapForLocalization(db.get(), std::nullopt, CasePatientId(c.root), &used, &used_map);
+  EXPECT_EQ(used, first.plan_id);
+  EXPECT_EQ(used_map, second.room_map_id);
+  EXPECT_EQ(loaded.markers.size(), second.build.map.markers.size());
+  // A plan without a map is a clear error too.
+  PlanRecord empty_plan;
+  empty_plan.patient_id = first.patient_id;
+  empty_plan.name = "no map";
+  const PlanId bare = db->AddPlan(empty_plan);
+  try {
+    LoadRoomMapForLocalization(db.get(), bare, "");
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("has no room map"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace arpos
