@@ -85,6 +85,9 @@ void KdTree::Build(const KdTreeOptions& options) {
   ARPOS_CHECK(problem.empty(), "KdTreeOptions: " << problem);
   ARPOS_CHECK(points_.size() < std::numeric_limits<uint32_t>::max(),
               "kd-tree of " << points_.size() << " points is too large");
+  for (size_t i = 0; i < points_.size(); ++i) {
+    ARPOS_CHECK(points_[i].allFinite(), "kd-tree point " << i << " is not finite");
+  }
   indices_.resize(points_.size());
   for (size_t i = 0; i < indices_.size(); ++i) indices_[i] = static_cast<uint32_t>(i);
   nodes_.clear();

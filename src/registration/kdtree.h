@@ -30,7 +30,8 @@ struct KdTreeOptions {
 class KdTree {
  public:
   KdTree() = default;
-  /// Builds over `cloud.points`. Throws arpos::Error for invalid options.
+  /// Builds over `cloud.points`. Throws arpos::Error for invalid options or a
+  /// non-finite point.
   explicit KdTree(const PointCloud& cloud, const KdTreeOptions& options = {});
   explicit KdTree(const std::vector<Eigen::Vector3d>& points_m,
                   const KdTreeOptions& options = {});

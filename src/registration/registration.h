@@ -45,7 +45,10 @@ struct RegistrationOptions {
   int max_iterations = 50;
   /// Converged when one update moves by less than both tolerances. They are
   /// deliberately tight: an update of 10 um / 0.0006 deg costs one more
-  /// iteration, not a false "converged" at millimetres (PITFALLS.md).
+  /// iteration, not a false "converged" at millimetres (PITFALLS.md). Also
+  /// converged: the pose comes back within the tolerances of a pose 2-4
+  /// updates earlier with updates below 10x the tolerances (sparse clouds make
+  /// correspondences flip back and forth; `message` says so).
   double translation_tolerance_m = 1e-5;
   double rotation_tolerance_rad = 1e-5;
   /// Levenberg-Marquardt with step acceptance instead of plain Gauss-Newton.
@@ -71,7 +74,7 @@ struct RegistrationOptions {
 /// Outcome of a local registration, as data.
 struct RegistrationResult {
   Rigid3d target_from_source;
-  bool converged = false;   ///< an update fell below both tolerances
+  bool converged = false;   ///< see RegistrationOptions' tolerances
   int iterations = 0;       ///< linearisations (correspondence searches) done
   /// Statistics at the last linearisation (the final pose differs from it by
   /// the last update, below the tolerances when converged):

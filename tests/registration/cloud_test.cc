@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <limits>
 #include <random>
 
 #include "registration/kdtree.h"
@@ -72,6 +73,9 @@ TEST(KdTree, EmptyAndDuplicatePoints) {
   for (int i = 0; i < 100; ++i) same.Add(Eigen::Vector3d(1, 2, 3));
   const KdTree tree(same);
   EXPECT_EQ(tree.Knn(Eigen::Vector3d(1, 2, 3), 10).size(), 10u);
+  PointCloud bad = same;
+  bad.points[5].y() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(KdTree{bad}, Error);
 }
 
 TEST(VoxelDownsample, CentroidPerVoxel) {
