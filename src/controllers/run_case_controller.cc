@@ -56,6 +56,7 @@ std::string RunCaseResult::Summary() const {
   if (!plan_summary.empty()) out << plan_summary << "\n";
   if (!session_summary.empty()) out << session_summary;
   if (!evaluation.empty()) out << evaluation;
+  for (const auto& f : failures) out << "FAILED: " << f << "\n";
   out << "stages done: ";
   for (size_t i = 0; i < stages_done.size(); ++i) out << (i ? ", " : "") << stages_done[i];
   out << "\n";
@@ -161,7 +162,14 @@ void RunCaseController::Run() {
   session_options.threads = options_.threads;
   session_options.actor = options_.actor;
   SessionController session(session_options, database_);
-  session.Run();
+  try {
+    session.Run();
+  } catch (const InputError& e) {
+    // The plan and room map stay stored; report what stopped the session.
+    result_.failures.push_back(std::string("session stage: ") + e.what());
+    Step("done (session stage failed)", 1.0);
+    return;
+  }
   const SessionStageResult& s = session.result();
   result_.session_id = s.session_id;
   result_.recordings.push_back(s.recording_id);

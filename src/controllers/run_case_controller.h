@@ -50,6 +50,11 @@ struct RunCaseResult {
   std::string session_summary;  ///< session stage figures
   /// Against ground truth, when the case has it (empty otherwise).
   std::string evaluation;
+  /// Stages that could not be done, with the reason ("session: ..."). What
+  /// earlier stages stored stays stored; later stages that depend on a failed
+  /// one are skipped.
+  std::vector<std::string> failures;
+  bool ok() const { return failures.empty(); }
   /// A person-readable summary of what was done and stored.
   std::string Summary() const;
 };

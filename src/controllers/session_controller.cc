@@ -164,6 +164,10 @@ void SessionController::Run() {
 
   ReconstructionOptions recon_options;
   recon_options.frame_stride = 1;  // frames are chosen here
+  // N = 5e4 (the paper's) gives ~2 cm registration voxels on a body (its
+  // bounding box is large, its skin small): measured to make exact poses
+  // worse (benchmark/registration.md). 5e5 registers at d_0 = 1 cm.
+  recon_options.target_points = 5e5;
   recon_options.crop_box = BoxAroundModel(model, plan->room_from_model_target, 0.12);
   recon_options.num_threads = options_.threads;
   ReconstructionBuilder builder(recon_options);

@@ -15,7 +15,8 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
       "Runs every stage that exists on a case folder (DATASET.md) and stores the\n"
       "results in the session store: validates the case, imports the reference\n"
       "model and target pose into a plan, registers the recordings and opens a\n"
-      "session.\n"
+      "session (room map, body marker map, reconstruction, alignment). A stage that\n"
+      "cannot be done is reported (exit status 1); what earlier stages stored stays.\n"
       "  --store DB     session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
       "  --patient ID   patient id to file the plan under (default: the case folder name)\n"
       "  --quick        check a sample of the images instead of all\n";
@@ -43,7 +44,7 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
   controller.Run();
   for (const auto& w : controller.result().warnings) std::cout << w << "\n";
   std::cout << "store: " << store_path << "\n" << controller.result().Summary();
-  return 0;
+  return controller.result().ok() ? 0 : 1;
 }
 
 }  // namespace arpos
