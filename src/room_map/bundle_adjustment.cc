@@ -7,6 +7,8 @@
 #include <sstream>
 
 #include <ceres/ceres.h>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 #include <ceres/rotation.h>
 
 #include "features/marker_pose.h"
@@ -120,6 +122,41 @@ struct KeypointDepthCost {
 };
 
 }  // namespace
+
+std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth, const std::array<Eigen::Vector2d, 4>& corners_image_px,
+                                           const CameraIntrinsics& k, int max_samples) {
+  std::vector<DepthSample> samples;
+  if (depth.empty() || max_samples <= 0) return samples;
+  ARPOS_CHECK(depth.type() == CV_16UC1, "depth must be CV_16UC1");
+  const std::vector<cv::Point2f> square = {{-0.5f, 0.5f}, {0.5f, 0.5f}, {0.5f, -0.5f}, {-0.5f, -0.5f}};
+  std::vector<cv::Point2f> quad;
+  for (const auto& c : corners_image_px) quad.emplace_back(static_cast<float>(c.x()), static_cast<float>(c.y()));
+  const cv::Matx33d h = cv::getPerspectiveTransform(square, quad);
+  const int n = std::max(2, static_cast<int>(std::ceil(std::sqrt(double(max_samples)))));
+  std::vector<cv::Point2d> px;
+  std::vector<float> z;
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      const double x = -0.35 + 0.7 * (i + 0.5) / n, y = -0.35 + 0.7 * (j + 0.5) / n;
+      const cv::Vec3d q = h * cv::Vec3d(x, y, 1);
+      const int u = cvRound(q[0] / q[2]), v = cvRound(q[1] / q[2]);
+      if (u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
+      const uint16_t d = depth.at<uint16_t>(v, u);
+      if (d == 0) continue;
+      px.emplace_back(u, v);
+      z.push_back(static_cast<float>(d / k.depth_scale));
+    }
+  }
+  if (k.HasDistortion() && !px.empty()) {
+    std::vector<cv::Point2d> ideal;
+    cv::undistortPoints(px, ideal, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
+    px = ideal;
+  }
+  for (size_t i = 0; i < px.size() && static_cast<int>(samples.size()) < max_samples; ++i) {
+    samples.push_back({Eigen::Vector2f(static_cast<float>(px[i].x), static_cast<float>(px[i].y)), z[i]});
+  }
+  return samples;
+}
 
 BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
   ARPOS_CHECK(problem != nullptr, "no problem given");

@@ -20,6 +20,8 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
 #include "geometry/rigid3.h"
 #include "sensor/intrinsics.h"
 
@@ -30,6 +32,14 @@ struct DepthSample {
   Eigen::Vector2f pixel;
   float depth_m = 0;
 };
+
+/// Depth pixels on a grid inside a marker (marker coordinates within +-0.35
+/// of the side: away from the edges, where depth smears), at most
+/// `max_samples`, with their ideal (undistorted) pixels. `depth` CV_16UC1 in
+/// units of intrinsics.depth_scale per metre; corners in image pixels.
+std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth,
+                                           const std::array<Eigen::Vector2d, 4>& corners_image_px,
+                                           const CameraIntrinsics& intrinsics, int max_samples);
 
 struct BaMarkerObservation {
   int camera = -1;  ///< index into BaProblem::camera_from_room

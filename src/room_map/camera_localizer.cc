@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "geometry/so3.h"
+#include "room_map/bundle_adjustment.h"
 #include "room_map/camera_response.h"
 #include "util/check.h"
 #include "util/string_util.h"
@@ -100,12 +101,16 @@ struct CameraLocalizer::Impl {
   std::vector<Eigen::Vector2d> keypoint_px;  // ideal pixels
   std::vector<MarkerObservation> markers;    // map markers in this frame (image pixels)
   std::vector<std::array<Eigen::Vector2d, 4>> marker_px;  // ideal pixels, parallel
+  std::vector<std::vector<DepthSample>> marker_depth;      // parallel
   std::vector<MarkerObservation> scratch;
   PoseCorrespondences corr;
   std::vector<int> match_of_keypoint;        // landmark per keypoint, -1
   std::vector<int> match_distance;
 
   // Motion model.
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  bool have_cov = false;
+  Mat6 last_cov = Mat6::Zero();
   int frames_lost = 1 << 20;
   bool have_last = false, have_prev = false;
   Rigid3d last_camera_from_room, prev_camera_from_room;
@@ -142,6 +147,18 @@ struct CameraLocalizer::Impl {
     markers.push_back(obs);
     const std::vector<Eigen::Vector2d> ideal = Ideal({obs.corners_px.begin(), obs.corners_px.end()});
     marker_px.push_back({ideal[0], ideal[1], ideal[2], ideal[3]});
+  }
+
+  // Depth samples for the markers that have none yet (marker_depth parallel to markers).
+  const cv::Mat* depth_image = nullptr;
+  void SampleMarkerDepths() {
+    while (marker_depth.size() < markers.size()) {
+      const MarkerObservation& obs = markers[marker_depth.size()];
+      const bool use = options.use_marker_depth && depth_image != nullptr && !depth_image->empty() &&
+                       obs.status == MarkerStatus::kRefined;
+      marker_depth.push_back(use ? SampleMarkerDepth(*depth_image, obs.corners_px, K, options.marker_depth_samples)
+                                 : std::vector<DepthSample>());
+    }
   }
 
   void DetectFull() {
@@ -292,6 +309,20 @@ struct CameraLocalizer::Impl {
                  CorrespondenceGroup::kMarker, static_cast<int>(m) * 4 + c);
       }
     }
+    for (size_t m = 0; m < marker_depth.size() && m < markers.size(); ++m) {
+      if (marker_depth[m].empty()) continue;
+      const RoomMapMarkerEntry* entry = map.FindMarker(markers[m].id);
+      const Eigen::Vector3d normal = entry->room_from_marker.rotation * Eigen::Vector3d::UnitZ();
+      const double n = static_cast<double>(marker_depth[m].size());
+      const double share = std::sqrt(std::max(1.0, n / options.marker_depth_max_effective));
+      for (const auto& sample : marker_depth[m]) {
+        const double sigma = options.marker_depth_sigma_const_m +
+                             options.marker_depth_sigma_quad_per_m * sample.depth_m * sample.depth_m;
+        corr.AddPlaneDepth(entry->room_from_marker.translation, normal,
+                           Eigen::Vector2d((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy),
+                           sample.depth_m, sigma * share);
+      }
+    }
     for (size_t i = 0; i < match_of_keypoint.size(); ++i) {
       const int l = match_of_keypoint[i];
       if (l < 0) continue;
@@ -369,6 +400,22 @@ struct CameraLocalizer::Impl {
     return scaled * last_camera_from_room;
   }
 
+  // Information of the predicted pose for the motion filter (nullopt: none yet).
+  std::optional<Mat6> PredictedInformation(double t) const {
+    if (!options.motion_filter || !have_cov || !have_last) return std::nullopt;
+    const double dt = std::max(1e-3, std::abs(t - last_t));
+    const double ratio = have_prev && last_t > prev_t ? dt / (last_t - prev_t) : 0.0;
+    // The velocity comes from the last two poses: their noise propagates.
+    Mat6 P = last_cov * (1 + 2 * ratio * ratio);
+    const double q_rot = 0.5 * options.motion_angular_accel_rad_s2 * dt * dt;
+    const double q_t = 0.5 * options.motion_accel_m_s2 * dt * dt;
+    P.topLeftCorner<3, 3>().diagonal().array() += q_rot * q_rot;
+    P.bottomRightCorner<3, 3>().diagonal().array() += q_t * q_t;
+    const Eigen::LDLT<Mat6> ldlt(P);
+    if (ldlt.info() != Eigen::Success) return std::nullopt;
+    return ldlt.solve(Mat6::Identity());
+  }
+
   // Refines from `initial` with matching by projection at `radius`, then at
   // the refined pose again with the small radius. Returns the last refinement.
   PoseRefinementResult Track(const Rigid3d& initial, double radius, const std::optional<PosePrior>& prior,
@@ -437,7 +484,7 @@ CameraLocalizer::CameraLocalizer(RoomMap map, const CameraIntrinsics& intrinsics
 CameraLocalizer::~CameraLocalizer() = default;
 
 void CameraLocalizer::Reset() {
-  impl_->have_last = impl_->have_prev = false;
+  impl_->have_last = impl_->have_prev = impl_->have_cov = false;
   impl_->frames_lost = 1 << 20;
 }
 
@@ -486,6 +533,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   }
   m.markers.clear();
   m.marker_px.clear();
+  m.marker_depth.clear();
   bool full_detection_done = false;
   if (options_.use_markers) {
     if (given) {
@@ -498,18 +546,40 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       full_detection_done = true;
     }
   }
+  m.depth_image = &frame.depth;
+  m.SampleMarkerDepths();
   Lap(&mark, &tm.detection_ms);
 
   PoseRefinementResult refined;
   bool ok = false;
   if (predicted) {
     std::optional<PosePrior> prior;
+    const std::optional<Impl::Mat6> filter_information = m.PredictedInformation(frame.timestamp_s);
     if (options_.use_motion_prior) {
       const double scale = std::max(1.0, std::abs(frame.timestamp_s - m.last_t) * 30.0);
       prior = PosePrior{*predicted, scale * RadFromDeg(options_.motion_prior_sigma_deg),
-                        scale * options_.motion_prior_sigma_m};
+                        scale * options_.motion_prior_sigma_m, filter_information};
     }
     refined = m.Track(*predicted, options_.search_radius_px, prior, &tm.matching_ms, &tm.refinement_ms, &mark);
+    if (prior && filter_information) {
+      // What the frame alone says; if the filtered pose disagrees with it
+      // beyond chance, trust the frame and restart the filter.
+      const PoseRefinementResult alone = RefineCameraPose(m.corr, m.K, refined.camera_from_room, options_.refiner);
+      const Eigen::LDLT<Impl::Mat6> data(alone.information);
+      const Eigen::LDLT<Impl::Mat6> pred(*filter_information);
+      if (data.info() == Eigen::Success && pred.info() == Eigen::Success) {
+        const Impl::Mat6 cov = data.solve(Impl::Mat6::Identity()) + pred.solve(Impl::Mat6::Identity());
+        const Rigid3d diff = alone.camera_from_room * refined.camera_from_room.Inverse();
+        Eigen::Matrix<double, 6, 1> e;
+        e << RotationVectorFromQuaternion(diff.rotation), diff.translation;
+        const double chi2 = e.dot(cov.ldlt().solve(e));
+        if (!(chi2 <= options_.filter_reset_chi2)) {
+          refined = alone;
+          m.have_cov = false;
+        }
+      }
+      Lap(&mark, &tm.refinement_ms);
+    }
     ok = m.Accept(refined, &out);
     if (ok) out.status = LocalizationStatus::kTracked;
   }
@@ -517,6 +587,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     // Relocalise: the whole image for markers, the whole map for keypoints.
     if (options_.use_markers && !full_detection_done) {
       m.DetectFull();
+      m.SampleMarkerDepths();
       Lap(&mark, &tm.detection_ms);
     }
     const std::optional<Rigid3d> hypothesis = m.Relocalise(frame, &tm.pnp_ms, &tm.matching_ms, &mark);
@@ -535,6 +606,11 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     m.last_camera_from_room = refined.camera_from_room;
     m.last_t = frame.timestamp_s;
     m.have_last = true;
+    {
+      const Eigen::LDLT<Impl::Mat6> ldlt(refined.information);
+      m.have_cov = ldlt.info() == Eigen::Success && out.status == LocalizationStatus::kTracked;
+      if (m.have_cov) m.last_cov = ldlt.solve(Impl::Mat6::Identity());
+    }
     m.frames_lost = 0;
   } else {
     out.ok = false;
@@ -543,6 +619,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     out.keypoints_used = 0;
     ++m.frames_lost;
     m.have_prev = false;
+    m.have_cov = false;
     std::ostringstream why;
     why << m.markers.size() << " map marker(s) and " << m.keypoints.size()
         << " keypoints found; too few agree on a pose";

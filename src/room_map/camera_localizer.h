@@ -81,6 +81,15 @@ struct CameraLocalizerOptions {
   double depth_sigma_const_m = 0.002;
   double depth_sigma_quad_per_m = 0.003;
 
+  /// Depth pixels inside each refined marker against the mapped marker's
+  /// plane: the depth sensor measures the marker's distance without the
+  /// corner fit's scale bias. sigma(z) per pixel as below; the samples of one
+  /// marker count as at most marker_depth_max_effective independent ones.
+  bool use_marker_depth = true;
+  int marker_depth_samples = 16;
+  int marker_depth_max_effective = 8;
+  double marker_depth_sigma_const_m = 0.001;
+  double marker_depth_sigma_quad_per_m = 0.0015;
   /// Tracking search: radius around the predicted pixel, descriptor distance,
   /// and the best/second-best ratio for a match.
   double search_radius_px = 15;
@@ -99,6 +108,16 @@ struct CameraLocalizerOptions {
   bool use_motion_prior = true;
   double motion_prior_sigma_m = 0.01;
   double motion_prior_sigma_deg = 0.5;
+  /// Constant-velocity filter: once a pose has a covariance, the prior is
+  /// the prediction with the covariance propagated from the last poses plus
+  /// the motion a hand-held camera can add in the frame interval
+  /// (acceleration * dt^2 / 2). The result is checked against what the frame
+  /// alone says; if they disagree (chi-square, 6 dof, above
+  /// filter_reset_chi2) the frame's own pose is used and the filter restarts.
+  bool motion_filter = true;
+  double motion_accel_m_s2 = 3.0;
+  double motion_angular_accel_rad_s2 = 10.0;
+  double filter_reset_chi2 = 22.5;
   /// Tracking continues from the last pose for this many lost frames, then
   /// the next frame is relocalised from scratch.
   int max_frames_lost_before_relocalising = 3;

@@ -10,6 +10,11 @@
 namespace arpos {
 
 void PoseCorrespondences::clear() {
+  plane_point_in_room.clear();
+  plane_normal_in_room.clear();
+  plane_ray.clear();
+  plane_depth_m.clear();
+  plane_inv_sigma.clear();
   points_in_room.clear();
   pixels.clear();
   inv_sigma_px.clear();
@@ -40,6 +45,15 @@ void PoseCorrespondences::Add(const Eigen::Vector3d& point_in_room, const Eigen:
   inv_sigma_depth.push_back(has_depth ? static_cast<float>(1.0 / sigma_depth_m) : 0.f);
   group.push_back(g);
   tag.push_back(t);
+}
+
+void PoseCorrespondences::AddPlaneDepth(const Eigen::Vector3d& point_in_room, const Eigen::Vector3d& normal_in_room,
+                                        const Eigen::Vector2d& ray_xy, double depth_m, double sigma_m) {
+  plane_point_in_room.push_back(point_in_room);
+  plane_normal_in_room.push_back(normal_in_room);
+  plane_ray.push_back(ray_xy);
+  plane_depth_m.push_back(static_cast<float>(depth_m));
+  plane_inv_sigma.push_back(static_cast<float>(1.0 / sigma_m));
 }
 
 std::string PoseRefinerOptions::Validate() const {
@@ -88,10 +102,11 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
 
   using Mat6 = Eigen::Matrix<double, 6, 6>;
   using Vec6 = Eigen::Matrix<double, 6, 1>;
-  Mat6 H;
+  Mat6 H, H_prior = Mat6::Zero();
   Vec6 g;
   for (int it = 0; it < options.max_iterations; ++it) {
     H.setZero();
+    H_prior.setZero();
     g.setZero();
     const bool tukey = it >= options.huber_iterations;
     int used = 0;
@@ -134,16 +149,46 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
         }
       }
     }
+    // Plane depths: z = (n.q) / (n.r) with n = R n_room, q = R p_room + t;
+    // dz/domega = -(n.q) / (n.r)^2 (n x r), dz/dt = n / (n.r).
+    for (size_t i = 0; i < corr.plane_ray.size(); ++i) {
+      const Eigen::Vector3d nc = R * corr.plane_normal_in_room[i];
+      const Eigen::Vector3d q = R * corr.plane_point_in_room[i] + t;
+      const Eigen::Vector3d ray(corr.plane_ray[i].x(), corr.plane_ray[i].y(), 1.0);
+      const double nr = nc.dot(ray);
+      if (std::abs(nr) < 1e-3) continue;
+      const double nq = nc.dot(q);
+      const double z = nq / nr;
+      if (z <= 0) continue;
+      const double s = corr.plane_inv_sigma[i];
+      const double r = (z - corr.plane_depth_m[i]) * s;
+      const double w = HuberWeight(std::abs(r), options.marker_huber);
+      Vec6 J;
+      J.head<3>() = -(nq / (nr * nr)) * nc.cross(ray);
+      J.tail<3>() = nc / nr;
+      J *= s;
+      H.noalias() += w * J * J.transpose();
+      g.noalias() += w * J * r;
+    }
     if (prior) {
       const Eigen::Matrix3d dR = R * prior_R_inv;
       const Eigen::Vector3d e_rot = RotationVectorFromQuaternion(Eigen::Quaterniond(dR));
       const Eigen::Vector3d e_t = t - dR * prior->camera_from_room.translation;
-      const double wr = 1.0 / (prior->sigma_rad * prior->sigma_rad);
-      const double wt = 1.0 / (prior->sigma_m * prior->sigma_m);
-      H.topLeftCorner<3, 3>().diagonal().array() += wr;
-      H.bottomRightCorner<3, 3>().diagonal().array() += wt;
-      g.head<3>() += wr * e_rot;
-      g.tail<3>() += wt * e_t;
+      if (prior->information) {
+        Vec6 e;
+        e << e_rot, e_t;
+        H_prior = *prior->information;
+        H += H_prior;
+        g += *prior->information * e;
+      } else {
+        const double wr = 1.0 / (prior->sigma_rad * prior->sigma_rad);
+        const double wt = 1.0 / (prior->sigma_m * prior->sigma_m);
+        H_prior.topLeftCorner<3, 3>().diagonal().array() += wr;
+        H_prior.bottomRightCorner<3, 3>().diagonal().array() += wt;
+        H += H_prior;
+        g.head<3>() += wr * e_rot;
+        g.tail<3>() += wt * e_t;
+      }
     } else if (used < 3) {
       return result;
     }
@@ -164,6 +209,7 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   if (result.iterations == options.max_iterations) result.converged = true;  // ran its course
   result.camera_from_room = Rigid3d(ProjectToSO3(R), t);
   result.information = H;
+  result.data_information = H - H_prior;
 
   // Inliers and residual statistics at the solution.
   double sum_m = 0, sum_k = 0;

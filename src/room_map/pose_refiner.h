@@ -39,8 +39,20 @@ struct PoseCorrespondences {
   std::vector<CorrespondenceGroup> group;
   std::vector<int> tag;                  ///< caller's id (landmark index, marker id * 4 + corner)
 
+  /// Depth pixels on known planes (e.g. inside a mapped marker): the ray of
+  /// ideal pixel (x, y, 1) = ((u - cx) / fx, (v - cy) / fy, 1) meets the plane
+  /// (point, unit normal, room frame) at a z that should equal the measured
+  /// depth. Residual (z_pred - z_meas) * inv_sigma, Huber-weighted.
+  std::vector<Eigen::Vector3d> plane_point_in_room;
+  std::vector<Eigen::Vector3d> plane_normal_in_room;
+  std::vector<Eigen::Vector2d> plane_ray;   ///< (x, y) of the ray (x, y, 1)
+  std::vector<float> plane_depth_m;
+  std::vector<float> plane_inv_sigma;
+
   size_t size() const { return pixels.size(); }
   void clear();
+  void AddPlaneDepth(const Eigen::Vector3d& point_in_room, const Eigen::Vector3d& normal_in_room,
+                     const Eigen::Vector2d& ray_xy, double depth_m, double sigma_m);
   void reserve(size_t n);
   void Add(const Eigen::Vector3d& point_in_room, const Eigen::Vector2d& pixel, double sigma_px,
            CorrespondenceGroup group, int tag, double depth_m = 0, double sigma_depth_m = 0);
@@ -60,12 +72,15 @@ struct PoseRefinerOptions {
   bool Check(std::string* reason = nullptr) const;
 };
 
-/// A Gaussian prior on the pose (e.g. from a motion model): sigmas of the
-/// rotation (rad) and translation (m) of camera_from_room about the prior.
+/// A Gaussian prior on the pose (e.g. from a motion model) about
+/// camera_from_room, on the perturbation [rotation (rad); translation (m)]:
+/// either isotropic sigmas or, if `information` is set, a full 6x6 information
+/// matrix (inverse covariance) in that order.
 struct PosePrior {
   Rigid3d camera_from_room;
   double sigma_rad = 0.05;
   double sigma_m = 0.05;
+  std::optional<Eigen::Matrix<double, 6, 6>> information;
 };
 
 struct PoseRefinementResult {
@@ -82,6 +97,8 @@ struct PoseRefinementResult {
   /// Approximate 6x6 information (J^T W J) of [rotation; translation] at the
   /// solution, for quality checks (e.g. degenerate geometry).
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
+  /// The same without the prior's share: what the correspondences alone say.
+  Eigen::Matrix<double, 6, 6> data_information = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
 /// Refines `camera_from_room_initial`. Never throws for bad geometry: with

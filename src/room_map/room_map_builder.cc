@@ -55,39 +55,6 @@ std::vector<Eigen::Vector2d> UndistortPixels(const std::vector<Eigen::Vector2d>&
   return result;
 }
 
-// Depth pixels on a grid inside the marker (marker coordinates within
-// +-0.35 side: away from the edges, where depth smears).
-std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth, double depth_scale,
-                                           const std::array<Eigen::Vector2d, 4>& corners_image_px,
-                                           const CameraIntrinsics& k, int max_samples) {
-  std::vector<DepthSample> samples;
-  if (depth.empty() || max_samples <= 0) return samples;
-  std::vector<cv::Point2f> square = {{-0.5f, 0.5f}, {0.5f, 0.5f}, {0.5f, -0.5f}, {-0.5f, -0.5f}};
-  std::vector<cv::Point2f> quad;
-  for (const auto& c : corners_image_px) quad.emplace_back(static_cast<float>(c.x()), static_cast<float>(c.y()));
-  const cv::Matx33d h = cv::getPerspectiveTransform(square, quad);
-  const int n = std::max(2, static_cast<int>(std::ceil(std::sqrt(double(max_samples)))));
-  std::vector<Eigen::Vector2d> px;
-  std::vector<float> z;
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      const double x = -0.35 + 0.7 * (i + 0.5) / n, y = -0.35 + 0.7 * (j + 0.5) / n;
-      const cv::Vec3d q = h * cv::Vec3d(x, y, 1);
-      const int u = cvRound(q[0] / q[2]), v = cvRound(q[1] / q[2]);
-      if (u < 0 || v < 0 || u >= depth.cols || v >= depth.rows) continue;
-      const uint16_t d = depth.at<uint16_t>(v, u);
-      if (d == 0) continue;
-      px.emplace_back(u, v);
-      z.push_back(static_cast<float>(d / depth_scale));
-    }
-  }
-  const std::vector<Eigen::Vector2d> ideal = UndistortPixels(px, k);
-  for (size_t i = 0; i < ideal.size() && static_cast<int>(samples.size()) < max_samples; ++i) {
-    samples.push_back({ideal[i].cast<float>(), z[i]});
-  }
-  return samples;
-}
-
 // One landmark candidate while associating.
 struct Candidate {
   Eigen::Vector3d weighted_sum = Eigen::Vector3d::Zero();
@@ -240,7 +207,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
             if (!obs.IsPrecise()) continue;
             MarkerPose pose = EstimateMarkerPose(obs, marker_size, K, frame.depth, options.marker_pose);
             std::vector<DepthSample> samples =
-                SampleMarkerDepth(frame.depth, K.depth_scale, obs.corners_px, K, options.marker_depth_samples);
+                SampleMarkerDepth(frame.depth, obs.corners_px, K, options.marker_depth_samples);
             MarkerObservation ideal = obs;
             const std::vector<Eigen::Vector2d> c =
                 UndistortPixels({obs.corners_px.begin(), obs.corners_px.end()}, K);

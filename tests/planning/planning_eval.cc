@@ -135,6 +135,16 @@ int main(int argc, char** argv) {
                                 e.translation_mm.mean, e.rotation_deg.mean, e.translation_mm.max, e.lost_percent);
     }
 
+    if (std::getenv("TRUTH_MARKERS")) {
+      // Diagnostic: the map's markers replaced by the true ones.
+      for (auto& m : build.map.markers) {
+        for (const auto& t : truth.room_markers) {
+          if (t.id != m.id) continue;
+          m.room_from_marker = t.parent_from_marker;
+          m.corners_in_room = t.corners_m;
+        }
+      }
+    }
     // Localisation of every sequence.
     CameraLocalizerOptions options = MakeCameraLocalizerOptions(folder.config);
     options.use_keypoints = loc_keypoints;
@@ -172,6 +182,42 @@ int main(int argc, char** argv) {
         sum_t.refinement_ms += r.timings.refinement_ms;
       }
       const TrajectoryEvaluation e = EvaluateTrajectory(*seq.CameraGroundTruth(), est);
+      {
+        // What the camera error does to the patient: the isocentre seen by
+        // the true camera, put into the room by the estimated camera.
+        const auto gt = *seq.CameraGroundTruth();
+        const Eigen::Vector3d iso = truth.isocentre_in_room_m;
+        double sum_iso = 0;
+        int count = 0;
+        for (const auto& p : est) {
+          for (const auto& g : gt) {
+            if (std::abs(g.timestamp_s - p.timestamp_s) > 1e-4) continue;
+            sum_iso += (p.room_from_x * (g.room_from_x.Inverse() * iso) - iso).norm() * 1000;
+            ++count;
+          }
+        }
+        if (count) std::cout << StringPrintf("  %s isocentre transfer error: mean %.3f mm\n", name.c_str(), sum_iso / count);
+      }
+      if (std::getenv("AXES")) {
+        // Error of the camera centre in the true camera's axes (x right, y down, z forward).
+        const auto gt = *seq.CameraGroundTruth();
+        Eigen::Vector3d sum_abs = Eigen::Vector3d::Zero(), sum = Eigen::Vector3d::Zero();
+        int count = 0;
+        for (const auto& p : est) {
+          for (const auto& g : gt) {
+            if (std::abs(g.timestamp_s - p.timestamp_s) > 1e-4) continue;
+            const Eigen::Vector3d d = (g.room_from_x.Inverse() * p.room_from_x).translation * 1000;
+            sum_abs += d.cwiseAbs();
+            sum += d;
+            ++count;
+          }
+        }
+        if (count) {
+          std::cout << StringPrintf("  %s camera-axis error mm: mean |x| %.2f |y| %.2f |z| %.2f; signed %.2f %.2f %.2f\n",
+                                    name.c_str(), sum_abs.x() / count, sum_abs.y() / count, sum_abs.z() / count,
+                                    sum.x() / count, sum.y() / count, sum.z() / count);
+        }
+      }
       const double k = seq.size() ? 1.0 / seq.size() : 0;
       std::cout << StringPrintf("%-18s %5zu   %6.1f %%  %7.3f %7.3f %7.3f %7.3f  %7.4f   %.2f (det %.2f kp %.2f match %.2f pnp %.2f ref %.2f)\n",
                                 name.c_str(), seq.size(), 100.0 - e.lost_percent, e.translation_mm.mean,
