@@ -57,7 +57,9 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (!(marker_support_side_px > 0)) out << "marker_support_side_px must be positive";
   else if (!(depth_sigma_const_m >= 0 && depth_sigma_quad_per_m >= 0 && depth_sigma_const_m + depth_sigma_quad_per_m > 0))
     out << "depth sigmas must be non-negative and not both zero";
-  else if (!(search_radius_px > 0) || !(refined_search_radius_px > 0)) out << "search radii must be positive";
+  else if (!(search_radius_px > 0) || !(refined_search_radius_px > 0) || !(wide_search_radius_px > 0))
+    out << "search radii must be positive";
+  else if (recent_pose_max_frames < 0) out << "recent_pose_max_frames must not be negative";
   else if (max_hamming < 1 || max_hamming > 256 || relocalisation_max_hamming < 1 || relocalisation_max_hamming > 256)
     out << "Hamming thresholds must be in 1..256";
   else if (!(match_ratio > 0 && match_ratio <= 1) || !(relocalisation_ratio > 0 && relocalisation_ratio <= 1))
@@ -65,7 +67,8 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
   else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
-  else if (min_marker_corners < 4 || min_keypoints < 6) out << "min_marker_corners must be >= 4 and min_keypoints >= 6";
+  else if (min_marker_corners < 4 || min_keypoints < 6 || min_keypoints_tracking < 6)
+    out << "min_marker_corners must be >= 4 and min_keypoints(_tracking) >= 6";
   else if (!(max_marker_rms_px > 0) || !(max_keypoint_rms_px > 0)) out << "RMS bounds must be positive";
   else if (!(max_position_sigma_m > 0)) out << "max_position_sigma_m must be positive";
   return out.str();
@@ -435,7 +438,7 @@ struct CameraLocalizer::Impl {
     return r;
   }
 
-  bool Accept(const PoseRefinementResult& r, LocalizationResult* out) const {
+  bool Accept(const PoseRefinementResult& r, bool tracking, LocalizationResult* out) const {
     // Markers used: all four corners inliers.
     int full = 0;
     for (size_t m = 0; m < markers.size(); ++m) {
@@ -460,8 +463,9 @@ struct CameraLocalizer::Impl {
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     const bool by_markers = r.marker_inliers >= options.min_marker_corners && full >= 1 &&
                             r.marker_rms_px <= options.max_marker_rms_px;
+    const int min_keypoints = tracking ? options.min_keypoints_tracking : options.min_keypoints;
     const bool by_keypoints =
-        r.keypoint_inliers >= options.min_keypoints && r.keypoint_rms_px <= options.max_keypoint_rms_px;
+        r.keypoint_inliers >= min_keypoints && r.keypoint_rms_px <= options.max_keypoint_rms_px;
     // Markers that disagree badly with an otherwise keypoint-based pose would
     // mean a wrong pose or a moved marker: require consistency when both exist.
     if (by_keypoints && r.marker_inliers > 0 && r.marker_rms_px > 2 * options.max_marker_rms_px) return false;
@@ -580,7 +584,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       }
       Lap(&mark, &tm.refinement_ms);
     }
-    ok = m.Accept(refined, &out);
+    ok = m.Accept(refined, true, &out);
     if (ok) out.status = LocalizationStatus::kTracked;
   }
   if (!ok) {
@@ -590,10 +594,17 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       m.SampleMarkerDepths();
       Lap(&mark, &tm.detection_ms);
     }
-    const std::optional<Rigid3d> hypothesis = m.Relocalise(frame, &tm.pnp_ms, &tm.matching_ms, &mark);
+    if (options_.use_keypoints && m.have_last && m.frames_lost <= options_.recent_pose_max_frames) {
+      refined = m.Track(m.last_camera_from_room, options_.wide_search_radius_px, std::nullopt, &tm.matching_ms,
+                        &tm.refinement_ms, &mark);
+      ok = m.Accept(refined, false, &out);
+      if (ok) out.status = LocalizationStatus::kRelocalized;
+    }
+    const std::optional<Rigid3d> hypothesis =
+        ok ? std::nullopt : m.Relocalise(frame, &tm.pnp_ms, &tm.matching_ms, &mark);
     if (hypothesis) {
       refined = m.Track(*hypothesis, options_.search_radius_px, std::nullopt, &tm.matching_ms, &tm.refinement_ms, &mark);
-      ok = m.Accept(refined, &out);
+      ok = m.Accept(refined, false, &out);
       if (ok) out.status = LocalizationStatus::kRelocalized;
     }
   }

@@ -96,7 +96,11 @@ struct CameraLocalizerOptions {
   double refined_search_radius_px = 4;
   int max_hamming = 64;
   double match_ratio = 0.9;
-  /// Relocalisation: brute-force matching against the whole map.
+  /// Relocalisation, first from the last pose if it is at most this many
+  /// frames old, searching landmarks within the wide radius...
+  int recent_pose_max_frames = 30;
+  double wide_search_radius_px = 50;
+  /// ... then by brute-force matching against the whole map.
   int relocalisation_max_hamming = 50;
   double relocalisation_ratio = 0.8;
   int ransac_iterations = 200;
@@ -126,6 +130,9 @@ struct CameraLocalizerOptions {
   /// corners, or at least min_keypoints keypoint inliers ...
   int min_marker_corners = 4;
   int min_keypoints = 20;
+  /// While tracking (matches found around a motion-predicted pose), fewer
+  /// keypoints suffice.
+  int min_keypoints_tracking = 12;
   /// ... and inlier RMS reprojection errors within these.
   double max_marker_rms_px = 1.5;
   double max_keypoint_rms_px = 2.5;
