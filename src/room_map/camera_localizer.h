@@ -199,7 +199,9 @@ class CameraLocalizer {
   LocalizationResult Localize(const RgbdFrame& frame);
   /// Same, with room-marker detections made by the caller on this frame
   /// (image pixels, any ids: those not in the map are ignored). Skips the
-  /// localiser's own marker detection.
+  /// localiser's own marker detection. For accurate corners the caller's
+  /// detector should run on the sRGB-linearised grey image (LinearizeSrgb,
+  /// camera_response.h), as the localiser's own detection does.
   LocalizationResult Localize(const RgbdFrame& frame,
                               const std::vector<MarkerObservation>& detections);
 

@@ -1,7 +1,18 @@
 // planning_eval: accuracy of the room map and of camera localisation on a
 // simulated case (not a test; prints a report).
 //
-//   planning_eval CASE_DIR [--frame-step N] [--no-keypoints] [--json]
+//   planning_eval CASE_DIR [--store DB] [--only SEQ] [--frame-step N] [--no-keypoints]
+//                 [--loc-no-keypoints] [--no-marker-depth] [--no-keypoint-depth]
+//                 [--no-linearize] [--corner-sigma PX] [--prior-m M] [--prior-deg D]
+//                 [--kp-sigma PX] [--min-kp N] [--depth-const M] [--depth-quad M]
+//
+// --store DB uses the newest room map in DB instead of building one.
+// Diagnostics by environment: NO_LOC=1 (map only), TRUTH_MARKERS=1 (localise
+// against the true marker poses), AXES=1 (camera error in camera axes),
+// MIN_LM_OBS, MAX_LM, SUPPORT_PX, CORNER_FLOOR (option overrides).
+// Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
+// the true camera sees it, put into the room by the estimated camera (what a
+// camera error does to the patient's position).
 //
 // Builds the map from CASE_DIR/room (as `arpos plan` does, without a store),
 // compares every mapped marker with simulation.yaml (corner errors, mm), then
