@@ -25,6 +25,7 @@
 #include "sensor/sequence.h"
 #include "store/database.h"
 #include "store/describe.h"
+#include "store/record_conversions.h"
 #include "store/sqlite_database.h"
 #include "ui/frame_view.h"
 #include "ui/model_view.h"
@@ -35,15 +36,6 @@ namespace arpos::ui {
 namespace {
 
 QString Q(const std::string& s) { return QString::fromStdString(s); }
-
-TriangleMesh FromStored(const StoredTriangleMesh& stored) {
-  TriangleMesh mesh;
-  mesh.vertices = stored.vertices;
-  for (const auto& f : stored.faces) {
-    mesh.faces.emplace_back(static_cast<int>(f[0]), static_cast<int>(f[1]), static_cast<int>(f[2]));
-  }
-  return mesh;
-}
 
 QPushButton* BrowseButton(QWidget* parent, QLineEdit* edit, bool folder) {
   auto* button = new QPushButton(QObject::tr("Browse…"), parent);
@@ -185,7 +177,7 @@ void PlanningPage::ShowLatestPlan() {
                      plan->reference_model.vertices.size(), 1000 * target.translation.x(),
                      1000 * target.translation.y(), 1000 * target.translation.z(), r_deg.x(), r_deg.y(),
                      r_deg.z())));
-  model_view_->SetMesh("target", FromStored(plan->reference_model), target, 0.25, 0.45, 0.95);
+  model_view_->SetMesh("target", FromStoredMesh(plan->reference_model), target, 0.25, 0.45, 0.95);
   model_view_->ShowRoomAxes(0.3);
   model_view_->ResetCamera();
 }

@@ -10,37 +10,11 @@
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
 #include "store/database.h"
+#include "store/record_conversions.h"
 #include "util/logging.h"
 #include "util/string_util.h"
 
 namespace arpos {
-namespace {
-
-RecordingIntrinsics ToRecordingIntrinsics(const CameraIntrinsics& c) {
-  RecordingIntrinsics r;
-  r.width = c.width;
-  r.height = c.height;
-  r.fx = c.fx;
-  r.fy = c.fy;
-  r.cx = c.cx;
-  r.cy = c.cy;
-  r.distortion = c.distortion;
-  r.depth_scale = c.depth_scale;
-  return r;
-}
-
-StoredTriangleMesh ToStoredMesh(const TriangleMesh& mesh) {
-  StoredTriangleMesh stored;
-  stored.vertices = mesh.vertices;
-  stored.faces.reserve(mesh.faces.size());
-  for (const auto& f : mesh.faces) {
-    stored.faces.push_back({static_cast<std::uint32_t>(f[0]), static_cast<std::uint32_t>(f[1]),
-                            static_cast<std::uint32_t>(f[2])});
-  }
-  return stored;
-}
-
-}  // namespace
 
 std::string RunCaseOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";

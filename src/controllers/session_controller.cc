@@ -17,6 +17,7 @@
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
 #include "store/database.h"
+#include "store/record_conversions.h"
 #include "util/file.h"
 #include "util/logging.h"
 #include "util/string_util.h"
@@ -37,25 +38,6 @@ StoredPointCloud ToStored(const PointCloud& cloud) {
     for (size_t i = 0; i < cloud.size(); ++i) stored.normals.push_back(cloud.normal3(i).cast<float>());
   }
   return stored;
-}
-
-StoredTriangleMesh ToStored(const TriangleMesh& mesh) {
-  StoredTriangleMesh stored;
-  stored.vertices = mesh.vertices;
-  for (const auto& f : mesh.faces) {
-    stored.faces.push_back({static_cast<std::uint32_t>(f[0]), static_cast<std::uint32_t>(f[1]),
-                            static_cast<std::uint32_t>(f[2])});
-  }
-  return stored;
-}
-
-TriangleMesh FromStored(const StoredTriangleMesh& stored) {
-  TriangleMesh mesh;
-  mesh.vertices = stored.vertices;
-  for (const auto& f : stored.faces) {
-    mesh.faces.emplace_back(static_cast<int>(f[0]), static_cast<int>(f[1]), static_cast<int>(f[2]));
-  }
-  return mesh;
 }
 
 // Box around the reference model at its target pose, grown by `margin_m`:
@@ -148,7 +130,7 @@ void SessionController::Run() {
     ARPOS_INPUT_ERROR("plan " << plan_id.value() << " has no reference model");
   }
   result_.plan_id = plan_id;
-  const TriangleMesh model = FromStored(plan->reference_model);
+  const TriangleMesh model = FromStoredMesh(plan->reference_model);
   const Sequence scan = Sequence::Open(folder.body_scan_dir);
   result_.frames = static_cast<int>(scan.size());
 
@@ -331,8 +313,7 @@ void SessionController::Run() {
     recording.name = "body_scan";
     recording.path = std::filesystem::absolute(folder.body_scan_dir).lexically_normal().string();
     recording.frame_count = static_cast<std::int64_t>(scan.size());
-    recording.intrinsics = {camera.width, camera.height, camera.fx, camera.fy, camera.cx,
-                            camera.cy, camera.distortion, camera.depth_scale};
+    recording.intrinsics = ToRecordingIntrinsics(camera);
     result_.recording_id = database_->AddRecording(recording);
 
     BodyMarkerMapRecord map;
@@ -354,7 +335,7 @@ void SessionController::Run() {
     recon.session_id = result_.session_id;
     recon.recording_id = result_.recording_id;
     recon.cloud = ToStored(body);
-    if (!mesh.mesh.empty()) recon.mesh = ToStored(mesh.mesh);
+    if (!mesh.mesh.empty()) recon.mesh = ToStoredMesh(mesh.mesh);
     recon.num_frames_used = builder.frames_used();
     recon.voxel_size_m = recon_options.output_voxel_m;
     result_.reconstruction_id = database_->AddReconstruction(recon);

@@ -4,27 +4,12 @@
 
 #include "geometry/mesh_io.h"
 #include "sensor/sequence.h"
+#include "store/record_conversions.h"
 #include "util/check.h"
 #include "util/logging.h"
 #include "util/string_util.h"
 
 namespace arpos {
-namespace {
-
-RecordingIntrinsics ToRecordingIntrinsics(const CameraIntrinsics& c) {
-  RecordingIntrinsics r;
-  r.width = c.width;
-  r.height = c.height;
-  r.fx = c.fx;
-  r.fy = c.fy;
-  r.cx = c.cx;
-  r.cy = c.cy;
-  r.distortion = c.distortion;
-  r.depth_scale = c.depth_scale;
-  return r;
-}
-
-}  // namespace
 
 std::string RoomMapStageOptions::Check() const {
   if (frame_step < 1) return "frame step must be at least 1";
