@@ -1,5 +1,7 @@
 #include "exe/args.h"
 
+#include <iostream>
+
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -65,6 +67,18 @@ long long Args::GetInt(const std::string& option, long long fallback) const {
   long long v = 0;
   if (!ParseInt(*value, &v)) ARPOS_INPUT_ERROR("option --" << option << ": '" << *value << "' is not an integer");
   return v;
+}
+
+std::optional<int> UsageExit(const Args& args, const char* usage, size_t positionals) {
+  if (args.Has("help")) {
+    std::cout << usage;
+    return 0;
+  }
+  if (args.positional().size() != positionals) {
+    std::cerr << usage;
+    return 2;
+  }
+  return std::nullopt;
 }
 
 }  // namespace arpos

@@ -32,4 +32,9 @@ class Args {
   std::map<std::string, std::string> values_;
 };
 
+/// The usual start of a subcommand: with --help, prints `usage` to stdout and
+/// returns 0; with other than `positionals` positional arguments, prints it
+/// to stderr and returns 2; otherwise nullopt (carry on).
+std::optional<int> UsageExit(const Args& args, const char* usage, size_t positionals);
+
 }  // namespace arpos

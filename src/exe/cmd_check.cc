@@ -14,14 +14,7 @@ int RunCheckCommand(const std::vector<std::string>& argv) {
       "lists, images and ground truth. Exit status 1 if anything is wrong.\n"
       "  --quick   read a sample of the images instead of all of them\n";
   const Args args(argv, {}, {"quick", "help"});
-  if (args.Has("help")) {
-    std::cout << usage;
-    return 0;
-  }
-  if (args.positional().size() != 1) {
-    std::cerr << usage;
-    return 2;
-  }
+  if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   CaseCheckOptions options;
   options.read_all_images = !args.Has("quick");
   const CaseCheckReport report = CheckCase(args.positional()[0], options);

@@ -35,14 +35,7 @@ int RunPlanCommand(const std::vector<std::string>& argv) {
       "  --poses FILE        also write the room frames' camera poses (TUM)\n";
   const Args args(argv, {"store", "plan", "patient", "frame-step", "max-frames", "threads", "max-landmarks", "poses"},
                   {"no-keypoints", "keep-couch", "help"});
-  if (args.Has("help")) {
-    std::cout << usage;
-    return 0;
-  }
-  if (args.positional().size() != 1) {
-    std::cerr << usage;
-    return 2;
-  }
+  if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   PlanRoomMapOptions options;
   options.case_dir = args.positional()[0];
   if (args.Has("plan")) {

@@ -2,10 +2,10 @@
 
 #include "controllers/run_case_controller.h"
 #include "exe/args.h"
+#include "exe/cli_progress.h"
 #include "exe/commands.h"
 #include "store/sqlite_database.h"
 #include "store/store_path.h"
-#include "util/string_util.h"
 
 namespace arpos {
 
@@ -21,14 +21,7 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
       "  --patient ID   patient id to file the plan under (default: the case folder name)\n"
       "  --quick        check a sample of the images instead of all\n";
   const Args args(argv, {"store", "patient"}, {"quick", "help"});
-  if (args.Has("help")) {
-    std::cout << usage;
-    return 0;
-  }
-  if (args.positional().size() != 1) {
-    std::cerr << usage;
-    return 2;
-  }
+  if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   RunCaseOptions options;
   options.case_dir = args.positional()[0];
   options.patient_external_id = args.GetOr("patient", "");
@@ -36,11 +29,7 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
   const std::string store_path = args.GetOr("store", DefaultStorePath());
   auto database = SqliteDatabase::Open(store_path);
   RunCaseController controller(options, database.get(),
-                               {[](const std::string& step, double fraction) {
-                                  std::cerr << StringPrintf("[%3.0f%%] ", 100 * fraction) << step
-                                            << std::endl;
-                                },
-                                nullptr});
+                               CliProgress());
   controller.Run();
   for (const auto& w : controller.result().warnings) std::cout << w << "\n";
   std::cout << "store: " << store_path << "\n" << controller.result().Summary();

@@ -2,10 +2,10 @@
 
 #include "controllers/session_controller.h"
 #include "exe/args.h"
+#include "exe/cli_progress.h"
 #include "exe/commands.h"
 #include "store/sqlite_database.h"
 #include "store/store_path.h"
-#include "util/string_util.h"
 
 namespace arpos {
 
@@ -23,14 +23,7 @@ int RunSessionCommand(const std::vector<std::string>& argv) {
       "  --out DIR                 also write model_pose.txt (model -> room for every body_scan\n"
       "                            frame, TUM), camera_pose.txt and reconstruction_mesh.ply\n";
   const Args args(argv, {"store", "plan", "initial-alignment", "out", "threads"}, {"help"});
-  if (args.Has("help")) {
-    std::cout << usage;
-    return 0;
-  }
-  if (args.positional().size() != 1) {
-    std::cerr << usage;
-    return 2;
-  }
+  if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   SessionStageOptions options;
   options.case_dir = args.positional()[0];
   if (args.Has("plan")) options.plan_id = PlanId(args.GetInt("plan", 0));
@@ -39,11 +32,7 @@ int RunSessionCommand(const std::vector<std::string>& argv) {
   options.threads = static_cast<int>(args.GetInt("threads", 2));
   auto database = SqliteDatabase::Open(args.GetOr("store", DefaultStorePath()));
   SessionController controller(options, database.get(),
-                               {[](const std::string& step, double fraction) {
-                                  std::cerr << StringPrintf("[%3.0f%%] ", 100 * fraction) << step
-                                            << std::endl;
-                                },
-                                nullptr});
+                               CliProgress());
   controller.Run();
   std::cout << controller.result().Summary();
   return 0;
