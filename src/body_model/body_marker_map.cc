@@ -3,6 +3,8 @@
 #include <ceres/ceres.h>
 #include <ceres/covariance.h>
 
+#include <opencv2/calib3d.hpp>
+
 #include <algorithm>
 #include <cmath>
 
@@ -255,6 +257,95 @@ BodyMarkerMapResult BuildBodyMarkerMap(const std::vector<BodyScanView>& views,
   result.views_used = static_cast<int>(std::count(view_used.begin(), view_used.end(), 1));
   result.mean_rms_px = result.markers.empty() ? 0 : rms_sum / result.markers.size();
   return result;
+}
+
+StickerLocalization LocalizeFromStickers(const BodyScanView& view, const BodyMarkerMapResult& map,
+                                         double marker_size_m, const CameraIntrinsics& intrinsics,
+                                         const StickerLocalizationOptions& options) {
+  ARPOS_CHECK(marker_size_m > 0, "sticker size must be positive");
+  ARPOS_CHECK(options.min_markers >= 1 && options.max_rms_px > 0, "invalid sticker localisation options");
+  const auto corners = MarkerCornersInMarker(marker_size_m);
+  struct Use {
+    const BodyMarkerView* seen;
+    Rigid3d room_from_marker;
+  };
+  std::vector<Use> used;
+  for (const auto& seen : view.markers) {
+    for (const auto& mapped : map.markers) {
+      if (mapped.marker_id == seen.marker_id) used.push_back({&seen, mapped.room_from_marker});
+    }
+  }
+  StickerLocalization out;
+  auto rms_of = [&](const Rigid3d& room_from_camera, const Use& u) {
+    const Rigid3d camera_from_marker = room_from_camera.Inverse() * u.room_from_marker;
+    double sum = 0;
+    for (int c = 0; c < 4; ++c) {
+      const Eigen::Vector3d p = camera_from_marker * corners[c];
+      if (p.z() <= 1e-6) return 1e9;
+      sum += (intrinsics.Project(p) - u.seen->corners_px[c]).squaredNorm();
+    }
+    return std::sqrt(sum / 4);
+  };
+  while (true) {
+    if (static_cast<int>(used.size()) < options.min_markers) {
+      out.ok = false;
+      out.reason = StringPrintf("%zu mapped sticker(s) usable, %d needed", used.size(), options.min_markers);
+      return out;
+    }
+    // Start from the single-view pose that explains all stickers best.
+    double best_cost = std::numeric_limits<double>::infinity();
+    Rigid3d best;
+    for (const Use& u : used) {
+      const MarkerPose& single = u.seen->single_view;
+      if (single.status != MarkerPoseStatus::kOk) continue;
+      const Rigid3d candidate = u.room_from_marker * single.camera_from_marker.Inverse();
+      double cost = 0;
+      for (const Use& v : used) cost += std::min(rms_of(candidate, v), 50.0);
+      if (cost < best_cost) best_cost = cost, best = candidate;
+    }
+    if (!std::isfinite(best_cost)) {
+      out.reason = "no sticker in view has an unambiguous single-view pose";
+      return out;
+    }
+    // Joint PnP over every corner of every used sticker.
+    std::vector<cv::Point3d> object;
+    std::vector<cv::Point2d> image;
+    for (const Use& u : used) {
+      for (int c = 0; c < 4; ++c) {
+        const Eigen::Vector3d p = u.room_from_marker * corners[c];
+        object.emplace_back(p.x(), p.y(), p.z());
+        image.emplace_back(u.seen->corners_px[c].x(), u.seen->corners_px[c].y());
+      }
+    }
+    const Rigid3d camera_from_room = best.Inverse();
+    const Eigen::Vector3d rv = camera_from_room.RotationVector();
+    cv::Mat rvec = (cv::Mat_<double>(3, 1) << rv.x(), rv.y(), rv.z());
+    cv::Mat tvec = (cv::Mat_<double>(3, 1) << camera_from_room.translation.x(),
+                    camera_from_room.translation.y(), camera_from_room.translation.z());
+    cv::solvePnP(object, image, cv::Mat(intrinsics.CvK()), intrinsics.CvDistortion(), rvec, tvec, true,
+                 cv::SOLVEPNP_ITERATIVE);
+    const Rigid3d refined =
+        Rigid3d::FromRotationVector(Eigen::Vector3d(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2)),
+                                    Eigen::Vector3d(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)))
+            .Inverse();
+    // Drop the worst sticker if it disagrees, else accept.
+    size_t worst = 0;
+    double worst_rms = -1, sum = 0;
+    for (size_t i = 0; i < used.size(); ++i) {
+      const double r = rms_of(refined, used[i]);
+      sum += r * r;
+      if (r > worst_rms) worst_rms = r, worst = i;
+    }
+    if (worst_rms > options.max_rms_px) {
+      used.erase(used.begin() + static_cast<std::ptrdiff_t>(worst));
+      continue;
+    }
+    out.ok = true;
+    out.room_from_camera = refined;
+    out.num_markers = static_cast<int>(used.size());
+    out.rms_px = std::sqrt(sum / used.size());
+    return out;
+  }
 }
 
 }  // namespace arpos

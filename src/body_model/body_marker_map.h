@@ -104,4 +104,33 @@ BodyMarkerMapResult BuildBodyMarkerMap(const std::vector<BodyScanView>& views,
                                        const CameraIntrinsics& intrinsics,
                                        const BodyMarkerMapOptions& options = {});
 
+/// The camera of a body-scan frame posed from stickers already in the map
+/// (the patient lies still during the scan, so mapped stickers are fixed in
+/// the room). For frames the room map cannot localise (the camera close over
+/// the body, no room marker or room texture in view): they still add
+/// stickers and depth to the session.
+struct StickerLocalizationOptions {
+  /// Mapped stickers needed in the frame: one 3 cm sticker fixes the camera's
+  /// rotation poorly, two or more spread over the body do not.
+  int min_markers = 2;
+  /// Accepted corner reprojection RMS (px) over the stickers used; a sticker
+  /// whose own RMS exceeds it is dropped (moved, misdetected) and the pose
+  /// solved again.
+  double max_rms_px = 1.0;
+};
+
+struct StickerLocalization {
+  bool ok = false;
+  Rigid3d room_from_camera;
+  int num_markers = 0;  ///< mapped stickers used
+  double rms_px = 0;
+  std::string reason;  ///< why not, when !ok
+};
+
+/// `view`: the frame's stickers as MakeBodyScanView returns them (its
+/// room_from_camera is ignored). `map`: stickers in the room frame.
+StickerLocalization LocalizeFromStickers(const BodyScanView& view, const BodyMarkerMapResult& map,
+                                         double marker_size_m, const CameraIntrinsics& intrinsics,
+                                         const StickerLocalizationOptions& options = {});
+
 }  // namespace arpos

@@ -88,7 +88,8 @@ std::string SessionStageResult::Summary() const {
   std::ostringstream out;
   const Eigen::Vector3d r_deg = room_from_model.RotationVector() * (180.0 / M_PI);
   out << StringPrintf(
-      "session %lld of plan %lld: %d of %d body-scan frames localised\n"
+      "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
+      "map, %d more posed from the stickers\n"
       "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
       "reconstruction: %d points, mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
@@ -96,7 +97,7 @@ std::string SessionStageResult::Summary() const {
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
       "%.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
-      frames_localized, frames, marker_map.markers.size(), marker_map.mean_rms_px,
+      frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
       marker_map.rejected.size(), reconstruction_points, mesh_vertices, alignment_method.c_str(),
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
@@ -157,20 +158,32 @@ void SessionController::Run() {
   depth_options.stride_px = camera.width > 800 ? 4 : 2;
   depth_options.max_depth_m = 2.5;
 
+  // A scan too short for the steps uses more of its frames: at least
+  // kMinFramesPerStep of each kind, or all.
+  const auto step_for = [&](int step) {
+    return std::max(1, std::min(step, static_cast<int>(scan.size()) / kMinFramesPerStep));
+  };
+  const size_t marker_step = static_cast<size_t>(step_for(options_.marker_frame_step));
+  const size_t recon_step = static_cast<size_t>(step_for(options_.reconstruction_frame_step));
   std::vector<BodyScanView> views;
+  std::vector<size_t> unlocalized;  // frames the room map could not localise
   std::vector<StampedPose> camera_poses;
   Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
   double t_localize = 0, t_markers = 0, t_recon = 0;
   for (size_t i = 0; i < scan.size(); ++i) {
-    const bool for_markers = i % options_.marker_frame_step == 0;
-    const bool for_recon = i % options_.reconstruction_frame_step == 0;
+    const bool for_markers = i % marker_step == 0;
+    const bool for_recon = i % recon_step == 0;
     if (!for_markers && !for_recon) continue;
+    ++result_.frames_considered;
     if (i % 20 == 0) Step(StringPrintf("body scan frame %zu of %zu", i + 1, scan.size()), 0.05 + 0.55 * i / scan.size());
     auto t0 = Clock::now();
     const RgbdFrame frame = scan.LoadFrame(i, camera);
     const LocalizationResult located = localizer.Localize(frame);
     t_localize += SecondsSince(t0);
-    if (!located.ok) continue;
+    if (!located.ok) {
+      unlocalized.push_back(i);
+      continue;
+    }
     ++result_.frames_localized;
     camera_poses.push_back({frame.timestamp_s, located.room_from_camera});
     camera_centre_sum += located.room_from_camera.translation;
@@ -197,6 +210,74 @@ void SessionController::Run() {
   map_options.marker_size_m = folder.config.body_markers.size_m;
   result_.marker_map = BuildBodyMarkerMap(views, camera, map_options);
   t_markers += SecondsSince(t0);
+
+  // Frames the room map could not localise (close over the body, no room in
+  // view) are posed from the stickers, since the patient lies still: a seed
+  // map from the room-localised frames (a sticker seen once counts) poses
+  // them, the map is rebuilt from all frames and the frames posed again. They
+  // add depth to the reconstruction and stickers the first map lacks;
+  // stickers mapped from enough room-localised frames keep those estimates
+  // (the bridged poses are derived from them).
+  if (!unlocalized.empty() && !views.empty()) {
+    Step("posing the other frames from the stickers", 0.6);
+    t0 = Clock::now();
+    const double sticker_size = folder.config.body_markers.size_m;
+    struct Bridged {
+      size_t index;
+      BodyScanView view;
+    };
+    std::vector<Bridged> candidates;
+    for (const size_t i : unlocalized) {
+      const RgbdFrame frame = scan.LoadFrame(i, camera);
+      BodyScanView view = MakeBodyScanView(frame, Rigid3d::Identity(), &detector, camera, sticker_size);
+      if (view.markers.size() >= 2) candidates.push_back({i, std::move(view)});
+    }
+    BodyMarkerMapOptions seed_options = map_options;
+    seed_options.min_views = 1;
+    BodyMarkerMapResult map = BuildBodyMarkerMap(views, camera, seed_options);
+    std::vector<const Bridged*> posed;
+    for (int round = 0; round < 2 && map.ok(); ++round) {
+      posed.clear();
+      std::vector<BodyScanView> all = views;
+      for (Bridged& c : candidates) {
+        const StickerLocalization p = LocalizeFromStickers(c.view, map, sticker_size, camera);
+        if (!p.ok) continue;
+        c.view.room_from_camera = p.room_from_camera;
+        posed.push_back(&c);
+        all.push_back(c.view);
+      }
+      if (posed.empty()) break;
+      map = BuildBodyMarkerMap(all, camera, round == 0 ? seed_options : map_options);
+    }
+    for (const Bridged* c : posed) {
+      ++result_.frames_posed_by_stickers;
+      camera_poses.push_back({c->view.timestamp_s, c->view.room_from_camera});
+      camera_centre_sum += c->view.room_from_camera.translation;
+      if (c->index % marker_step == 0) views.push_back(c->view);
+      if (c->index % recon_step == 0) {
+        const RgbdFrame frame = scan.LoadFrame(c->index, camera);
+        builder.AddFrame(DepthToCloud(frame, camera, depth_options), c->view.room_from_camera);
+      }
+    }
+    if (!posed.empty()) {
+      for (const auto& m : map.markers) {
+        const bool known = std::any_of(result_.marker_map.markers.begin(), result_.marker_map.markers.end(),
+                                       [&](const BodyMarkerEstimate& e) { return e.marker_id == m.marker_id; });
+        if (known) continue;
+        result_.marker_map.markers.push_back(m);
+        result_.marker_map.rejected.erase(m.marker_id);
+      }
+      std::sort(result_.marker_map.markers.begin(), result_.marker_map.markers.end(),
+                [](const BodyMarkerEstimate& a, const BodyMarkerEstimate& b) { return a.marker_id < b.marker_id; });
+      double sum = 0, worst = 0;
+      for (const auto& m : result_.marker_map.markers) sum += m.rms_px, worst = std::max(worst, m.rms_px);
+      result_.marker_map.mean_rms_px = sum / result_.marker_map.markers.size();
+      result_.marker_map.max_rms_px = worst;
+    }
+    std::sort(camera_poses.begin(), camera_poses.end(),
+              [](const StampedPose& a, const StampedPose& b) { return a.timestamp_s < b.timestamp_s; });
+    t_markers += SecondsSince(t0);
+  }
   result_.times.localization_s = t_localize;
   result_.times.marker_map_s = t_markers;
 

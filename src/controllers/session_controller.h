@@ -37,6 +37,8 @@ namespace arpos {
 
 class Database;
 
+inline constexpr int kMinFramesPerStep = 20;
+
 struct SessionStageOptions {
   std::filesystem::path case_dir;
   std::optional<PlanId> plan_id;  ///< else the newest plan of the case's patient
@@ -46,8 +48,11 @@ struct SessionStageOptions {
   /// If set: writes model_pose.txt (TUM, every body_scan frame) and the
   /// reconstruction cloud and mesh as PLY files there.
   std::optional<std::filesystem::path> out_dir;
-  int marker_frame_step = 2;         ///< body marker map from every n-th frame
-  int reconstruction_frame_step = 10;  ///< l of the paper
+  /// Body marker map from every n-th frame, reconstruction from every l-th
+  /// (l of the paper); a scan shorter than kMinFramesPerStep times a step
+  /// uses smaller steps (at least kMinFramesPerStep frames, or all).
+  int marker_frame_step = 2;
+  int reconstruction_frame_step = 10;
   int poisson_depth = 8;
   int threads = 2;
   std::string actor = "arpos session";
@@ -67,7 +72,11 @@ struct SessionStageResult {
   BodyMarkerMapId body_marker_map_id;
   ReconstructionId reconstruction_id;
   AlignmentId alignment_id;  ///< the final (ICP-refined) alignment
-  int frames = 0, frames_localized = 0;
+  int frames = 0;
+  int frames_considered = 0;  ///< every marker_frame_step-th or reconstruction_frame_step-th
+  int frames_localized = 0;   ///< in the room map
+  /// Frames the room map could not localise, posed from mapped stickers.
+  int frames_posed_by_stickers = 0;
   BodyMarkerMapResult marker_map;
   int reconstruction_points = 0;
   int mesh_vertices = 0;

@@ -24,6 +24,8 @@ const char kUsage[] =
     "                              stickers, a sticker that falls off\n"
     "  --frames room=N,body=N,tracking=N   frames per sequence (default 300,150,150)\n"
     "  --tracking-sequences K      number of tracking sequences (default 2)\n"
+    "  --room-walk full|couch      planning walk: the couch and every wall (default),\n"
+    "                              or around the couch only (small cases)\n"
     "  --no-noise                  exact renders: no blur, noise or depth dropouts\n"
     "  --body-mesh PATH            MakeHuman base.obj (default: $ARPOS_BODY_MESH or the\n"
     "                              shared data copy)\n"
@@ -67,7 +69,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
       }
     }
     const Args args(argv,
-                    {"profile", "seed", "frames", "tracking-sequences", "body-mesh",
+                    {"profile", "seed", "frames", "tracking-sequences", "room-walk", "body-mesh",
                      "png-compression", "supersampling"},
                     {"hard", "no-noise"});
     if (args.positional().size() != 1) {
@@ -83,6 +85,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     options.noise = !args.Has("no-noise");
     if (auto frames = args.Get("frames")) ParseFrames(*frames, &options);
     options.tracking_sequences = static_cast<int>(args.GetInt("tracking-sequences", 2));
+    options.room_walk = args.GetOr("room-walk", "full");
     if (auto mesh = args.Get("body-mesh")) options.body_mesh_path = *mesh;
     options.png_compression = static_cast<int>(args.GetInt("png-compression", 1));
     options.supersampling = static_cast<int>(args.GetInt("supersampling", 0));

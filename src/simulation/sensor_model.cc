@@ -71,6 +71,7 @@ SensorProfile MakeSensorProfile(const std::string& name) {
     p.edge_dropout = 0.7;
     p.random_dropout = 0.004;
     p.projector_baseline_m = 0.075;
+    p.disparity_subpixel = 8;  // Kinect v1 / PrimeSense: 1/8 px disparity steps
   } else if (name == "l515") {
     // Intel RealSense L515 class: LiDAR depth registered to 1280x720 colour.
     p.intrinsics.width = 1280;
@@ -224,6 +225,10 @@ cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, 
         double n = white * PixelNormal(HashCombine(key, 4), x, y);
         if (!smooth.empty()) n += a * smooth.at<float>(y, x);
         d += sigma * n;
+        if (profile.disparity_subpixel > 0 && profile.projector_baseline_m > 0 && d > 0) {
+          const double fbq = K.fx * profile.projector_baseline_m * profile.disparity_subpixel;
+          d = fbq / std::max(1.0, std::round(fbq / d));
+        }
       }
       const double units = std::round(d * K.depth_scale);
       if (units <= 0 || units > 65535) continue;

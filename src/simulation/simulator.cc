@@ -92,6 +92,7 @@ std::string SimulationOptions::Check() const {
     return "frames: at most 100000 per sequence";
   }
   if (tracking_sequences < 0 || tracking_sequences > 99) return "tracking-sequences: must be 0..99";
+  if (room_walk != "full" && room_walk != "couch") return "room-walk: must be full or couch, got " + room_walk;
   if (png_compression < 0 || png_compression > 9) return "png-compression: must be 0..9";
   if (supersampling != 0 && supersampling != 1 && supersampling != 3 && supersampling != 5) {
     return "supersampling: must be 1, 3 or 5 (or 0 for the profile's)";
@@ -145,6 +146,10 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
         {V3(1.3, 0.1, 1.45), V3(0.0, 0.5, 0.0)},       // floor markers across the couch
         {V3(0.2, -0.7, 1.3), V3(0.0, 0.1, 0.0)},       // back to marker 0
     };
+    if (options_.room_walk == "couch") {
+      // Around the couch: foot, left side, head end, right side, across, back.
+      keys = {keys[0], keys[1], keys[2], keys[3], keys[11], keys[9], keys[8], keys[7], keys[12], keys[13]};
+    }
     keys = Jitter(keys, &rng, 0.08, 0.1);
     const double duration = std::max(1.0 / kFps, (s.frames - 1) * s.frame_interval_s);
     s.camera = HandheldTrajectory(keys, duration, rng.Bits());
@@ -162,7 +167,12 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
     s.frame_interval_s = FrameInterval(s.frames, kBodyScanDurationS);
     const double z = top + 0.15;  // roughly the body's front surface
     // 0.6-0.9 m from the skin: stickers of 0.03 m span 20-28 px (xtion).
+    // The recording starts and ends looking across the body at the floor
+    // markers beside the couch (the documented scan protocol: room markers
+    // and stickers in view first and last), so the camera is anchored in the
+    // room map and the stickers with it.
     std::vector<CameraKey> keys = {
+        {V3(cx + 0.3, iso.y() - 0.45, 1.55), V3(cx - 0.35, iso.y() - 0.1, 0.55)},
         {V3(cx - 0.45, iso.y() - 0.35, 1.5), V3(cx, iso.y() - 0.2, z)},
         {V3(cx - 0.4, iso.y() + 0.15, 1.6), V3(cx, iso.y() + 0.12, z)},
         {V3(cx - 0.05, iso.y() + 0.35, 1.68), V3(cx, iso.y() + 0.1, z)},
@@ -170,6 +180,8 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
         {V3(cx + 0.45, iso.y() - 0.4, 1.5), V3(cx, iso.y() - 0.3, z)},
         {V3(cx + 0.05, iso.y() - 0.75, 1.55), V3(cx, iso.y() - 0.25, z)},
         {V3(cx - 0.42, iso.y() - 0.15, 1.55), V3(cx, iso.y(), z)},
+        {V3(cx + 0.1, iso.y() - 0.3, 1.6), V3(cx + 0.3, iso.y(), z)},
+        {V3(cx - 0.3, iso.y() - 0.35, 1.55), V3(cx + 0.35, iso.y(), 0.55)},
     };
     keys = Jitter(keys, &rng, 0.05, 0.05);
     const double duration = std::max(1.0 / kFps, (s.frames - 1) * s.frame_interval_s);

@@ -41,6 +41,10 @@ struct SimulationOptions {
   int body_scan_frames = 150;
   int tracking_frames = 150;
   int tracking_sequences = 2;
+  /// Planning walk: "full" (the couch and every wall) or "couch" (around
+  /// the couch only, looking at the floor markers and the couch; the quick
+  /// walk a small case of few room frames needs).
+  std::string room_walk = "full";
   /// MakeHuman base.obj; empty = DefaultBodyMeshPath().
   std::filesystem::path body_mesh_path;
   int png_compression = 1;  ///< 0..9 (cv::IMWRITE_PNG_COMPRESSION); 1: fast, 3 % larger than 9

@@ -104,5 +104,69 @@ TEST(BodyMarkerMap, NoStickersGivesAnEmptyMap) {
   EXPECT_TRUE(map.rejected.empty());
 }
 
+TEST(StickerLocalization, PosesFramesFromTheMappedStickers) {
+  const Scan scan = RenderScan("xtion", 24, 3);
+  const BodyMarkerMapResult map = BuildBodyMarkerMap(scan.views, scan.intrinsics);
+  ASSERT_TRUE(map.ok());
+  int posed = 0;
+  for (const BodyScanView& truth_view : scan.views) {
+    BodyScanView view = truth_view;
+    view.room_from_camera = Rigid3d::Identity();  // unknown: to be found
+    const StickerLocalization s = LocalizeFromStickers(view, map, 0.03, scan.intrinsics);
+    if (view.markers.size() < 2) {
+      EXPECT_FALSE(s.ok) << "frame " << view.frame_index << ": fewer than two stickers";
+      continue;
+    }
+    if (!s.ok) continue;
+    ++posed;
+    const PoseError e = ComputePoseError(truth_view.room_from_camera, s.room_from_camera);
+    // A camera 0.6-0.9 m away posed from 3 cm stickers: millimetres, a
+    // fraction of a degree.
+    EXPECT_LT(e.translation_mm, 5.0) << "frame " << view.frame_index;
+    EXPECT_LT(e.rotation_deg, 0.5) << "frame " << view.frame_index;
+    EXPECT_LE(s.rms_px, 1.0);
+    EXPECT_GE(s.num_markers, 2);
+  }
+  EXPECT_GE(posed, 12);
+}
+
+TEST(StickerLocalization, MovedStickerIsDroppedAndTooFewIsRefused) {
+  const Scan scan = RenderScan("xtion", 24, 3);
+  BodyMarkerMapResult map = BuildBodyMarkerMap(scan.views, scan.intrinsics);
+  ASSERT_TRUE(map.ok());
+  // The frame with the most mapped stickers; one of them "moves" by 3 cm.
+  const BodyScanView* best = nullptr;
+  for (const auto& v : scan.views) {
+    if (!best || v.markers.size() > best->markers.size()) best = &v;
+  }
+  ASSERT_NE(best, nullptr);
+  ASSERT_GE(best->markers.size(), 4u);
+  int moved = -1;
+  for (const auto& seen : best->markers) {
+    for (const auto& m : map.markers) {
+      if (m.marker_id == seen.marker_id) moved = seen.marker_id;
+    }
+  }
+  ASSERT_GE(moved, 0);
+  for (auto& m : map.markers) {
+    if (m.marker_id == moved) m.room_from_marker.translation += Eigen::Vector3d(0.03, 0, 0);
+  }
+  const StickerLocalization s = LocalizeFromStickers(*best, map, 0.03, scan.intrinsics);
+  ASSERT_TRUE(s.ok) << s.reason;
+  int mapped_in_view = 0;
+  for (const auto& seen : best->markers) {
+    for (const auto& m : map.markers) mapped_in_view += m.marker_id == seen.marker_id;
+  }
+  EXPECT_EQ(s.num_markers, mapped_in_view - 1);
+  EXPECT_LT(ComputePoseError(best->room_from_camera, s.room_from_camera).translation_mm, 5.0);
+
+  // Only one sticker of the map in view: refused with the reason.
+  BodyScanView one = *best;
+  one.markers.resize(1);
+  const StickerLocalization refused = LocalizeFromStickers(one, map, 0.03, scan.intrinsics);
+  EXPECT_FALSE(refused.ok);
+  EXPECT_NE(refused.reason.find("needed"), std::string::npos) << refused.reason;
+}
+
 }  // namespace
 }  // namespace arpos

@@ -347,7 +347,9 @@ TEST(Depth, BodyPixelsBackProjectOntoTheReferenceModel) {
     if (sim.sequences()[i].kind == SequenceKind::kBodyScan) body_scan = static_cast<int>(i);
   }
   ASSERT_GE(body_scan, 0);
-  for (int f : {0, 2}) {
+  // Frames over the body (the first and last of a scan look at the room
+  // markers beside the couch).
+  for (int f : {1, 2}) {
     const SimulatedFrame frame = sim.RenderFrame(body_scan, f);
     ASSERT_TRUE(frame.room_from_model.has_value());
     const Rigid3d model_from_camera = frame.room_from_model->Inverse() * frame.room_from_camera;
@@ -426,7 +428,9 @@ TEST(GroundTruth, StickersAreDetectedWithTheirIdsAtTheTrueCorners) {
         ASSERT_TRUE(room_truth.count(ids[i])) << "false room marker id " << ids[i];
       }
     }
-    EXPECT_GE(body_here, 2) << "body_scan frame " << f;
+    // The first and last frames look at the room markers beside the couch.
+    const bool over_body = f > 0 && f + 1 < sim.sequences()[body_scan].frames;
+    if (over_body) EXPECT_GE(body_here, 2) << "body_scan frame " << f;
   }
   EXPECT_GE(seen.size(), body_truth.size() * 3 / 4);
   // Small (20-30 px) stickers with noise and blur: OpenCV's SUBPIX is good to
