@@ -10,6 +10,7 @@ arpos="${1:-$here/build/bin/arpos}"
 out="$here/sample_sessions/demo_xtion"
 rm -rf "$out"
 "$arpos" simulate "$out" --profile xtion --seed 1 \
-  --frames room=10,body=6,tracking=6 --tracking-sequences 1 --png-compression 9
+  --room-walk couch --frames room=24,body=8,tracking=3 --tracking-sequences 1 \
+  --png-compression 9
 "$arpos" check "$out"
 du -sh "$out"

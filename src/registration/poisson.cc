@@ -6,13 +6,43 @@
 #include <pcl/point_types.h>
 #include <pcl/surface/poisson.h>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <chrono>
+#include <cstdio>
 
 #include "registration/kdtree.h"
 #include "util/check.h"
 
 namespace arpos {
 namespace {
+
+// PCL's Poisson code printf()s diagnostics ("Vertex pair not in list") to
+// stdout while extracting the iso-surface, which would mix into the
+// program's own output. Standard output is sent to /dev/null for the call.
+class MuteStdout {
+ public:
+  MuteStdout() {
+    std::fflush(stdout);
+    saved_ = dup(STDOUT_FILENO);
+    const int null_fd = open("/dev/null", O_WRONLY);
+    if (saved_ >= 0 && null_fd >= 0) dup2(null_fd, STDOUT_FILENO);
+    if (null_fd >= 0) close(null_fd);
+  }
+  ~MuteStdout() {
+    std::fflush(stdout);
+    if (saved_ >= 0) {
+      dup2(saved_, STDOUT_FILENO);
+      close(saved_);
+    }
+  }
+  MuteStdout(const MuteStdout&) = delete;
+  MuteStdout& operator=(const MuteStdout&) = delete;
+
+ private:
+  int saved_ = -1;
+};
 
 double NowS() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch())
@@ -57,7 +87,10 @@ PoissonResult PoissonMesh(const PointCloud& cloud, const PoissonOptions& options
   poisson.setInputCloud(input);
   pcl::PointCloud<pcl::PointNormal> vertices;
   std::vector<pcl::Vertices> polygons;
-  poisson.reconstruct(vertices, polygons);
+  {
+    const MuteStdout mute;
+    poisson.reconstruct(vertices, polygons);
+  }
   result.poisson_s = NowS() - start_s;
 
   TriangleMesh full;

@@ -40,6 +40,32 @@ TEST(Cli, HelpListsSubcommands) {
   EXPECT_EQ(RunArpos("check --no-such-option x").status, 2);
 }
 
+// The README's main command on the committed sample session: every stage
+// runs, the store is written, and the model pose at scan time lands near the
+// simulator's truth (the sample is small: a few body-scan frames).
+TEST(Cli, RunCaseOnTheSampleSessionDoesEveryStage) {
+  TempDir dir;
+  const std::string store = (dir.path() / "store.db").string();
+  const Result r =
+      RunArpos("run-case " + std::string(ARPOS_SAMPLE_SESSIONS_DIR) + "/demo_xtion --store " + store);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("body marker map"), std::string::npos) << r.output;
+  const size_t at = r.output.find("model pose at scan time vs body_groundtruth.txt: ");
+  ASSERT_NE(at, std::string::npos) << r.output;
+  double mm = -1, deg = -1;
+  ASSERT_EQ(std::sscanf(r.output.c_str() + at, "model pose at scan time vs body_groundtruth.txt: %lf mm, %lf deg",
+                        &mm, &deg),
+            2);
+  EXPECT_LT(mm, 5.0) << r.output;
+  EXPECT_LT(deg, 0.5) << r.output;
+  // Running it again adds a second session to the same store.
+  const Result again =
+      RunArpos("run-case " + std::string(ARPOS_SAMPLE_SESSIONS_DIR) + "/demo_xtion --store " + store);
+  EXPECT_EQ(again.status, 0) << again.output;
+  const Result info = RunArpos("store info --store " + store);
+  EXPECT_EQ(info.status, 0) << info.output;
+}
+
 TEST(Cli, CheckPassesAndFails) {
   TempDir dir;
   testing::WriteTinyCase(dir.path() / "case");
