@@ -32,6 +32,10 @@
 
 namespace arpos::sim {
 
+/// Changes whenever the same options and seed render different bytes
+/// (scene, trajectories, sensor models); caches of simulated cases key on it.
+inline constexpr int kSimulatorVersion = 2;
+
 struct SimulationOptions {
   std::string profile = "xtion";  ///< xtion | l515
   uint64_t seed = 1;

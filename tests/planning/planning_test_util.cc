@@ -10,6 +10,7 @@
 
 #include "geometry/mesh_io.h"
 #include "room_map/plan_stage.h"
+#include "simulation/simulator.h"
 #include "sensor/case_config.h"
 #include "sensor/tum_io.h"
 #include "sensor/sequence.h"
@@ -108,7 +109,7 @@ const SmallCase& GetSmallCase(const std::string& profile, int room_frames, int t
   static std::mutex mutex;
   static std::map<std::string, std::unique_ptr<SmallCase>> cases;
   std::lock_guard<std::mutex> lock(mutex);
-  const std::string name = "v1_case_" + profile + "_" + std::to_string(room_frames) + "_" +
+  const std::string name = "sim" + std::to_string(sim::kSimulatorVersion) + "_case_" + profile + "_" + std::to_string(room_frames) + "_" +
                            std::to_string(tracking_frames) + (tracking_from_room ? "_r" : "_t");
   auto& slot = cases[name];
   if (!slot) {

@@ -1,0 +1,97 @@
+// The session stage through its controllers, on copies of the committed
+// sample session (small: 24 room, 8 body-scan frames).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "controllers/run_case_controller.h"
+#include "controllers/session_controller.h"
+#include "geometry/pose_error.h"
+#include "sensor/tum_io.h"
+#include "store/sqlite_database.h"
+#include "util/check.h"
+#include "util/file.h"
+
+namespace arpos {
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path CopySample(const TempDir& dir) {
+  const fs::path to = dir.path() / "demo_xtion";
+  fs::copy(fs::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion", to, fs::copy_options::recursive);
+  return to;
+}
+
+TEST(SessionStage, SampleSessionGivesStickersReconstructionAndModelPose) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  RunCaseOptions options;
+  options.case_dir = case_dir;
+  options.out_dir = dir.path() / "out";
+  RunCaseController run(options, db.get());
+  run.Run();
+  const RunCaseResult& r = run.result();
+  ASSERT_TRUE(r.ok()) << r.Summary();
+  EXPECT_NE(r.session_summary.find("more posed from the stickers"), std::string::npos);
+  const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
+  const auto estimate = ReadTrajectory(dir.path() / "out" / "model_pose.txt");
+  ASSERT_EQ(truth.size(), estimate.size());
+  const PoseError e = ComputePoseError(truth.front().room_from_x, estimate.front().room_from_x);
+  EXPECT_LT(e.translation_mm, 5.0);
+  EXPECT_LT(e.rotation_deg, 0.5);
+  EXPECT_EQ(db->ListSessions(r.plan_id).size(), 1u);
+}
+
+// A body scan with no patient on the couch (the room recording put in its
+// place): the stage stops with a clear error and stores no session.
+TEST(SessionStage, ScanWithoutABodyIsAClearErrorAndStoresNoSession) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  fs::remove_all(case_dir / "body_scan");
+  fs::copy(case_dir / "room", case_dir / "body_scan", fs::copy_options::recursive);
+  // Body ground truth is optional; without it the case stays valid.
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  RunCaseOptions options;
+  options.case_dir = case_dir;
+  RunCaseController run(options, db.get());
+  run.Run();
+  const RunCaseResult& r = run.result();
+  ASSERT_FALSE(r.ok());
+  ASSERT_EQ(r.failures.size(), 1u) << r.Summary();
+  EXPECT_NE(r.failures.front().find("body_scan"), std::string::npos) << r.failures.front();
+  EXPECT_NE(r.failures.front().find("no usable body surface"), std::string::npos) << r.failures.front();
+  // What planning stored stays; no half session.
+  EXPECT_EQ(db->ListSessions(r.plan_id).size(), 0u);
+  EXPECT_TRUE(r.room_map_id.valid());
+}
+
+TEST(SessionStage, ManualAlignmentThatIsNotRigidIsRefusedNamingTheFile) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  RunCaseOptions options;
+  options.case_dir = case_dir;
+  RunCaseController run(options, db.get());
+  run.Run();
+  ASSERT_TRUE(run.result().ok()) << run.result().Summary();
+  const fs::path bad = dir.path() / "initial.txt";
+  WriteFileAtomic(bad, "2 0 0 0.7\n0 1 0 1.3\n0 0 1 0.9\n0 0 0 1\n");
+  SessionStageOptions session;
+  session.case_dir = case_dir;
+  session.initial_alignment = bad;
+  SessionController controller(session, db.get());
+  try {
+    controller.Run();
+    FAIL() << "a scaled matrix was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(bad.string()), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("not a rigid transform"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(db->ListSessions(run.result().plan_id).size(), 1u);  // only run-case's
+}
+
+}  // namespace
+}  // namespace arpos
