@@ -1,6 +1,7 @@
 #include "controllers/session_controller.h"
 
 #include <chrono>
+#include <cstdlib>
 #include <sstream>
 
 #include "geometry/mesh_io.h"
@@ -91,20 +92,50 @@ std::string SessionStageResult::Summary() const {
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
       "map, %d more posed from the stickers\n"
       "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
-      "reconstruction: %d points, mesh %d vertices\n"
+      "reconstruction: %d points (mean-correction shift %.2f mm taken off), mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
       "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
       "%.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
       frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
-      marker_map.rejected.size(), reconstruction_points, mesh_vertices, alignment_method.c_str(),
+      marker_map.rejected.size(), reconstruction_points, 1000 * anchor_shift_m.norm(), mesh_vertices, alignment_method.c_str(),
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
       times.marker_map_s, times.reconstruction_s, times.mesh_s, times.alignment_s, times.store_s,
       times.total_s);
   return out.str();
+}
+
+Eigen::Vector3d AnchorShift(const std::vector<ReconstructionFrameReport>& reports,
+                            const Eigen::Vector3d& centre) {
+  // How far each refined frame's correction moves the reconstruction's
+  // centre; corrections far beyond the median are left out (a frame GICP
+  // pulled wrongly). Only the shift: averaging the rotations was measured to
+  // make the rotation worse on some seeds (GICP rotation noise per frame).
+  std::vector<Eigen::Vector3d> shifts;
+  bool first = true;
+  for (const auto& r : reports) {
+    if (!r.used) continue;
+    if (!first && !r.refined) continue;  // fused without a consistent correction
+    shifts.push_back(first ? Eigen::Vector3d::Zero() : Eigen::Vector3d(r.correction * centre - centre));
+    first = false;
+  }
+  if (shifts.size() < 3) return Eigen::Vector3d::Zero();
+  std::vector<double> sizes;
+  for (const auto& v : shifts) sizes.push_back(v.norm());
+  std::vector<double> sorted = sizes;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double limit = 3 * sorted[sorted.size() / 2] + 1e-4;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  int n = 0;
+  for (size_t i = 0; i < shifts.size(); ++i) {
+    if (sizes[i] > limit) continue;
+    mean += shifts[i];
+    ++n;
+  }
+  return n >= 3 ? Eigen::Vector3d(mean / n) : Eigen::Vector3d::Zero();
 }
 
 SessionController::SessionController(SessionStageOptions options, Database* database,
@@ -165,6 +196,7 @@ void SessionController::Run() {
   };
   const size_t marker_step = static_cast<size_t>(step_for(options_.marker_frame_step));
   const size_t recon_step = static_cast<size_t>(step_for(options_.reconstruction_frame_step));
+  std::vector<ReconstructionFrameReport> recon_reports;
   std::vector<BodyScanView> views;
   std::vector<size_t> unlocalized;  // frames the room map could not localise
   std::vector<StampedPose> camera_poses;
@@ -195,7 +227,7 @@ void SessionController::Run() {
     }
     if (for_recon) {
       t0 = Clock::now();
-      builder.AddFrame(DepthToCloud(frame, camera, depth_options), located.room_from_camera);
+      recon_reports.push_back(builder.AddFrame(DepthToCloud(frame, camera, depth_options), located.room_from_camera));
       t_recon += SecondsSince(t0);
     }
   }
@@ -256,7 +288,7 @@ void SessionController::Run() {
       if (c->index % marker_step == 0) views.push_back(c->view);
       if (c->index % recon_step == 0) {
         const RgbdFrame frame = scan.LoadFrame(c->index, camera);
-        builder.AddFrame(DepthToCloud(frame, camera, depth_options), c->view.room_from_camera);
+        recon_reports.push_back(builder.AddFrame(DepthToCloud(frame, camera, depth_options), c->view.room_from_camera));
       }
     }
     if (!posed.empty()) {
@@ -286,6 +318,19 @@ void SessionController::Run() {
   Step("cropping the reconstruction to the body", 0.65);
   t0 = Clock::now();
   PointCloud fused = builder.Cloud();
+  // GICP makes the frames consistent with the first one fused, so the
+  // reconstruction carries that frame's localisation error. Each refined
+  // frame's correction is (first frame's error) * (its own error)^-1; their
+  // mean estimates the first frame's error (the others average out): its
+  // shift at the reconstruction's centre is taken off the whole cloud.
+  if (options_.average_anchor) {
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (size_t i = 0; i < fused.size(); ++i) centre += fused.points[i].head<3>();
+    centre /= static_cast<double>(std::max<size_t>(1, fused.size()));
+    const Eigen::Vector3d shift = AnchorShift(recon_reports, centre);
+    fused.Transform(Rigid3d(Eigen::Quaterniond::Identity(), -shift));
+    result_.anchor_shift_m = shift;
+  }
   const Eigen::Vector3d box_centre = recon_options.crop_box->frame_from_box.translation;
   const Eigen::Vector3d towards_cameras =
       (camera_centre_sum / camera_poses.size() - box_centre).normalized();

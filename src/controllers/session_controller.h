@@ -53,6 +53,10 @@ struct SessionStageOptions {
   /// uses smaller steps (at least kMinFramesPerStep frames, or all).
   int marker_frame_step = 2;
   int reconstruction_frame_step = 10;
+  /// Take the mean shift of the reconstruction's frames' GICP corrections
+  /// off the fused cloud (it otherwise carries the first frame's
+  /// localisation error).
+  bool average_anchor = true;
   int poisson_depth = 8;
   int threads = 2;
   std::string actor = "arpos session";
@@ -85,9 +89,18 @@ struct SessionStageResult {
   Rigid3d room_from_model;       ///< reference model pose at scan time
   double alignment_fitness = 0, alignment_rmse_m = 0;
   std::map<int, Rigid3d> model_from_markers;
+  /// Shift taken off the reconstruction (zero when not applied), metres.
+  Eigen::Vector3d anchor_shift_m = Eigen::Vector3d::Zero();
   SessionStepTimes times;
   std::string Summary() const;
 };
+
+struct ReconstructionFrameReport;
+/// The mean shift of `centre` by the frames' GICP corrections (the first
+/// fused frame counts as none; refused and outlying corrections left out);
+/// zero with fewer than three frames.
+Eigen::Vector3d AnchorShift(const std::vector<ReconstructionFrameReport>& reports,
+                            const Eigen::Vector3d& centre);
 
 class SessionController : public Controller {
  public:

@@ -8,6 +8,7 @@
 #include "controllers/run_case_controller.h"
 #include "controllers/session_controller.h"
 #include "geometry/pose_error.h"
+#include "registration/reconstruction.h"
 #include "sensor/tum_io.h"
 #include "store/sqlite_database.h"
 #include "util/check.h"
@@ -22,6 +23,41 @@ fs::path CopySample(const TempDir& dir) {
   const fs::path to = dir.path() / "demo_xtion";
   fs::copy(fs::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion", to, fs::copy_options::recursive);
   return to;
+}
+
+TEST(AnchorShift, MeanOfTheRefinedFramesWithOutliersAndUnrefinedLeftOut) {
+  const Eigen::Vector3d centre(0.7, 1.4, 0.9);
+  auto report = [](bool used, bool refined, const Rigid3d& correction) {
+    ReconstructionFrameReport r;
+    r.used = used;
+    r.refined = refined;
+    r.correction = correction;
+    return r;
+  };
+  const auto shift = [](double x, double y, double z) {
+    return Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(x, y, z));
+  };
+  std::vector<ReconstructionFrameReport> reports = {
+      report(true, false, Rigid3d::Identity()),    // the first frame: no correction
+      report(false, false, shift(1, 1, 1)),        // skipped by the stride
+      report(true, true, shift(0.003, 0, 0)),
+      report(true, true, shift(0.003, 0.003, 0)),
+      report(true, false, shift(0.5, 0, 0)),       // correction refused
+      report(true, true, shift(0.002, -0.003, 0)),
+      report(true, true, shift(0.2, 0, 0)),        // outlier
+  };
+  const Eigen::Vector3d s = AnchorShift(reports, centre);
+  EXPECT_NEAR(s.x(), 0.008 / 4, 1e-12);
+  EXPECT_NEAR(s.y(), 0.0, 1e-12);
+  EXPECT_NEAR(s.z(), 0.0, 1e-12);
+  // A rotation about the room origin moves the centre: its shift there counts.
+  const Rigid3d turn = Rigid3d::FromRotationVector(Eigen::Vector3d(0, 0, 0.001), Eigen::Vector3d::Zero());
+  reports = {report(true, false, Rigid3d::Identity()), report(true, true, turn), report(true, true, turn),
+             report(true, true, turn)};
+  EXPECT_NEAR((AnchorShift(reports, centre) - 0.75 * (turn * centre - centre)).norm(), 0, 1e-12);
+  // Fewer than three frames: nothing to average.
+  reports.resize(2);
+  EXPECT_EQ(AnchorShift(reports, centre), Eigen::Vector3d::Zero());
 }
 
 TEST(SessionStage, SampleSessionGivesStickersReconstructionAndModelPose) {

@@ -430,7 +430,9 @@ TEST(GroundTruth, StickersAreDetectedWithTheirIdsAtTheTrueCorners) {
     }
     // The first and last frames look at the room markers beside the couch.
     const bool over_body = f > 0 && f + 1 < sim.sequences()[body_scan].frames;
-    if (over_body) EXPECT_GE(body_here, 2) << "body_scan frame " << f;
+    if (over_body) {
+      EXPECT_GE(body_here, 2) << "body_scan frame " << f;
+    }
   }
   EXPECT_GE(seen.size(), body_truth.size() * 3 / 4);
   // Small (20-30 px) stickers with noise and blur: OpenCV's SUBPIX is good to
