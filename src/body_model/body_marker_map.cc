@@ -66,16 +66,24 @@ struct ViewRef {
   const BodyMarkerView* marker;
 };
 
-double ViewRmsPx(const Rigid3d& room_from_marker, const ViewRef& ref, const CameraIntrinsics& k,
-                 const std::array<Eigen::Vector3d, 4>& corners) {
-  const Rigid3d camera_from_marker = ref.view->room_from_camera.Inverse() * room_from_marker;
+// Corner reprojection RMS (px) of a sticker at `room_from_marker` seen by a
+// camera at `room_from_camera`; 1e9 if a corner is behind the camera.
+double CornerRmsPx(const Rigid3d& room_from_marker, const Rigid3d& room_from_camera,
+                   const BodyMarkerView& seen, const CameraIntrinsics& k,
+                   const std::array<Eigen::Vector3d, 4>& corners) {
+  const Rigid3d camera_from_marker = room_from_camera.Inverse() * room_from_marker;
   double sum = 0;
   for (int c = 0; c < 4; ++c) {
     const Eigen::Vector3d p = camera_from_marker * corners[c];
     if (p.z() <= 1e-6) return 1e9;
-    sum += (k.Project(p) - ref.marker->corners_px[c]).squaredNorm();
+    sum += (k.Project(p) - seen.corners_px[c]).squaredNorm();
   }
   return std::sqrt(sum / 4);
+}
+
+double ViewRmsPx(const Rigid3d& room_from_marker, const ViewRef& ref, const CameraIntrinsics& k,
+                 const std::array<Eigen::Vector3d, 4>& corners) {
+  return CornerRmsPx(room_from_marker, ref.view->room_from_camera, *ref.marker, k, corners);
 }
 
 // Fits one sticker to the given views; returns the final cost summary.
@@ -277,14 +285,7 @@ StickerLocalization LocalizeFromStickers(const BodyScanView& view, const BodyMar
   }
   StickerLocalization out;
   auto rms_of = [&](const Rigid3d& room_from_camera, const Use& u) {
-    const Rigid3d camera_from_marker = room_from_camera.Inverse() * u.room_from_marker;
-    double sum = 0;
-    for (int c = 0; c < 4; ++c) {
-      const Eigen::Vector3d p = camera_from_marker * corners[c];
-      if (p.z() <= 1e-6) return 1e9;
-      sum += (intrinsics.Project(p) - u.seen->corners_px[c]).squaredNorm();
-    }
-    return std::sqrt(sum / 4);
+    return CornerRmsPx(u.room_from_marker, room_from_camera, *u.seen, intrinsics, corners);
   };
   while (true) {
     if (static_cast<int>(used.size()) < options.min_markers) {

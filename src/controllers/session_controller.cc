@@ -1,6 +1,7 @@
 #include "controllers/session_controller.h"
 
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <sstream>
 
@@ -92,14 +93,14 @@ std::string SessionStageResult::Summary() const {
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
       "map, %d more posed from the stickers\n"
       "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
-      "reconstruction: %d points (mean-correction shift %.2f mm taken off), mesh %d vertices\n"
+      "reconstruction: %d points (mean frame correction %.2f mm, %.3f deg taken off), mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
       "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
       "%.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
       frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
-      marker_map.rejected.size(), reconstruction_points, 1000 * anchor_shift_m.norm(), mesh_vertices, alignment_method.c_str(),
+      marker_map.rejected.size(), reconstruction_points, 1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
@@ -108,34 +109,41 @@ std::string SessionStageResult::Summary() const {
   return out.str();
 }
 
-Eigen::Vector3d AnchorShift(const std::vector<ReconstructionFrameReport>& reports,
-                            const Eigen::Vector3d& centre) {
-  // How far each refined frame's correction moves the reconstruction's
-  // centre; corrections far beyond the median are left out (a frame GICP
-  // pulled wrongly). Only the shift: averaging the rotations was measured to
-  // make the rotation worse on some seeds (GICP rotation noise per frame).
-  std::vector<Eigen::Vector3d> shifts;
+Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
+                         const Eigen::Vector3d& centre) {
+  // Per refined frame: its correction's rotation vector and the shift it
+  // gives the reconstruction's centre; the first fused frame counts as no
+  // correction; frames whose shift is far beyond the median are left out (a
+  // frame GICP pulled wrongly). Small angles: plain means.
+  std::vector<Eigen::Vector3d> rotations, shifts;
   bool first = true;
   for (const auto& r : reports) {
     if (!r.used) continue;
     if (!first && !r.refined) continue;  // fused without a consistent correction
+    rotations.push_back(first ? Eigen::Vector3d::Zero() : r.correction.RotationVector());
     shifts.push_back(first ? Eigen::Vector3d::Zero() : Eigen::Vector3d(r.correction * centre - centre));
     first = false;
   }
-  if (shifts.size() < 3) return Eigen::Vector3d::Zero();
+  if (shifts.size() < 3) return Rigid3d::Identity();
   std::vector<double> sizes;
   for (const auto& v : shifts) sizes.push_back(v.norm());
   std::vector<double> sorted = sizes;
   std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
   const double limit = 3 * sorted[sorted.size() / 2] + 1e-4;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), shift = Eigen::Vector3d::Zero();
   int n = 0;
   for (size_t i = 0; i < shifts.size(); ++i) {
     if (sizes[i] > limit) continue;
-    mean += shifts[i];
+    rotation += rotations[i];
+    shift += shifts[i];
     ++n;
   }
-  return n >= 3 ? Eigen::Vector3d(mean / n) : Eigen::Vector3d::Zero();
+  if (n < 3) return Rigid3d::Identity();
+  rotation /= n;
+  shift /= n;
+  // Rotation about the centre, then the shift: centre -> centre + shift.
+  const Rigid3d turn = Rigid3d::FromRotationVector(rotation, Eigen::Vector3d::Zero());
+  return Rigid3d(turn.rotation, centre + shift - turn * centre);
 }
 
 SessionController::SessionController(SessionStageOptions options, Database* database,
@@ -197,121 +205,165 @@ void SessionController::Run() {
   const size_t marker_step = static_cast<size_t>(step_for(options_.marker_frame_step));
   const size_t recon_step = static_cast<size_t>(step_for(options_.reconstruction_frame_step));
   std::vector<ReconstructionFrameReport> recon_reports;
-  std::vector<BodyScanView> views;
-  std::vector<size_t> unlocalized;  // frames the room map could not localise
-  std::vector<StampedPose> camera_poses;
-  Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
+  const double sticker_size = folder.config.body_markers.size_m;
+  // 1. Every considered frame: room localisation (with its uncertainty),
+  //    stickers, and the depth cloud of reconstruction frames.
+  struct ScanFrame {
+    size_t index = 0;
+    double timestamp_s = 0;
+    bool localized = false;
+    Rigid3d room_from_camera;  ///< room map's, then the final pose
+    bool posed = false;        ///< a final pose exists
+    BodyScanView view;         ///< stickers (room_from_camera: final pose)
+    std::optional<PointCloud> cloud;
+  };
+  std::vector<ScanFrame> frames;
   double t_localize = 0, t_markers = 0, t_recon = 0;
   for (size_t i = 0; i < scan.size(); ++i) {
     const bool for_markers = i % marker_step == 0;
     const bool for_recon = i % recon_step == 0;
     if (!for_markers && !for_recon) continue;
     ++result_.frames_considered;
-    if (i % 20 == 0) Step(StringPrintf("body scan frame %zu of %zu", i + 1, scan.size()), 0.05 + 0.55 * i / scan.size());
+    if (i % 20 == 0) Step(StringPrintf("body scan frame %zu of %zu", i + 1, scan.size()), 0.05 + 0.5 * i / scan.size());
     auto t0 = Clock::now();
     const RgbdFrame frame = scan.LoadFrame(i, camera);
     const LocalizationResult located = localizer.Localize(frame);
     t_localize += SecondsSince(t0);
-    if (!located.ok) {
-      unlocalized.push_back(i);
-      continue;
-    }
-    ++result_.frames_localized;
-    camera_poses.push_back({frame.timestamp_s, located.room_from_camera});
-    camera_centre_sum += located.room_from_camera.translation;
-    if (for_markers) {
-      t0 = Clock::now();
-      views.push_back(MakeBodyScanView(frame, located.room_from_camera, &detector, camera,
-                                       folder.config.body_markers.size_m));
-      t_markers += SecondsSince(t0);
-    }
-    if (for_recon) {
-      t0 = Clock::now();
-      recon_reports.push_back(builder.AddFrame(DepthToCloud(frame, camera, depth_options), located.room_from_camera));
-      t_recon += SecondsSince(t0);
-    }
+    ScanFrame f;
+    f.index = i;
+    f.timestamp_s = frame.timestamp_s;
+    f.localized = located.ok;
+    f.room_from_camera = located.room_from_camera;
+    result_.frames_localized += located.ok ? 1 : 0;
+    t0 = Clock::now();
+    f.view = MakeBodyScanView(frame, located.ok ? located.room_from_camera : Rigid3d::Identity(), &detector,
+                              camera, sticker_size);
+    t_markers += SecondsSince(t0);
+    if (for_recon) f.cloud = DepthToCloud(frame, camera, depth_options);
+    frames.push_back(std::move(f));
   }
-  if (camera_poses.empty()) {
+  if (result_.frames_localized == 0) {
     ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
                       << ": the camera could not be localised in the room map in any frame");
   }
 
-  Step("building the body marker map", 0.6);
+  // 2. Stickers and cameras made consistent with each other. A body-scan
+  //    frame close over the patient sees room markers far and oblique, so its
+  //    room pose is uncertain (sigma of 5-20 mm is common); the stickers fix
+  //    the cameras relative to the body far better. So: a seed sticker map
+  //    from the room-localised frames; every frame with two or more mapped
+  //    stickers posed from them and the map rebuilt from those poses (three
+  //    rounds); then the one rigid offset between this sticker-consistent
+  //    frame and the room, as the weighted mean (1/sigma^2) of what each
+  //    room-localised frame says, is applied to all. Frames without
+  //    stickers keep their room pose.
+  Step("building the body marker map", 0.55);
   auto t0 = Clock::now();
   BodyMarkerMapOptions map_options;
-  map_options.marker_size_m = folder.config.body_markers.size_m;
-  result_.marker_map = BuildBodyMarkerMap(views, camera, map_options);
-  t_markers += SecondsSince(t0);
-
-  // Frames the room map could not localise (close over the body, no room in
-  // view) are posed from the stickers, since the patient lies still: a seed
-  // map from the room-localised frames (a sticker seen once counts) poses
-  // them, the map is rebuilt from all frames and the frames posed again. They
-  // add depth to the reconstruction and stickers the first map lacks;
-  // stickers mapped from enough room-localised frames keep those estimates
-  // (the bridged poses are derived from them).
-  if (!unlocalized.empty() && !views.empty()) {
-    Step("posing the other frames from the stickers", 0.6);
-    t0 = Clock::now();
-    const double sticker_size = folder.config.body_markers.size_m;
-    struct Bridged {
-      size_t index;
-      BodyScanView view;
-    };
-    std::vector<Bridged> candidates;
-    for (const size_t i : unlocalized) {
-      const RgbdFrame frame = scan.LoadFrame(i, camera);
-      BodyScanView view = MakeBodyScanView(frame, Rigid3d::Identity(), &detector, camera, sticker_size);
-      if (view.markers.size() >= 2) candidates.push_back({i, std::move(view)});
+  map_options.marker_size_m = sticker_size;
+  BodyMarkerMapOptions seed_options = map_options;
+  seed_options.min_views = 1;
+  auto views_of = [&](bool localized_only) {
+    std::vector<BodyScanView> v;
+    for (const ScanFrame& f : frames) {
+      if (f.view.markers.empty()) continue;
+      if (localized_only ? f.localized : f.posed) v.push_back(f.view);
     }
-    BodyMarkerMapOptions seed_options = map_options;
-    seed_options.min_views = 1;
-    BodyMarkerMapResult map = BuildBodyMarkerMap(views, camera, seed_options);
-    std::vector<const Bridged*> posed;
-    for (int round = 0; round < 2 && map.ok(); ++round) {
-      posed.clear();
-      std::vector<BodyScanView> all = views;
-      for (Bridged& c : candidates) {
-        const StickerLocalization p = LocalizeFromStickers(c.view, map, sticker_size, camera);
-        if (!p.ok) continue;
-        c.view.room_from_camera = p.room_from_camera;
-        posed.push_back(&c);
-        all.push_back(c.view);
-      }
-      if (posed.empty()) break;
-      map = BuildBodyMarkerMap(all, camera, round == 0 ? seed_options : map_options);
+    return v;
+  };
+  BodyMarkerMapResult map = BuildBodyMarkerMap(views_of(true), camera, seed_options);
+  int sticker_posed = 0;
+  for (int round = 0; round < 3 && map.ok(); ++round) {
+    sticker_posed = 0;
+    for (ScanFrame& f : frames) {
+      f.posed = false;
+      if (f.view.markers.size() < 2) continue;
+      const StickerLocalization p = LocalizeFromStickers(f.view, map, sticker_size, camera);
+      if (!p.ok) continue;
+      f.view.room_from_camera = p.room_from_camera;
+      f.posed = true;
+      ++sticker_posed;
     }
-    for (const Bridged* c : posed) {
-      ++result_.frames_posed_by_stickers;
-      camera_poses.push_back({c->view.timestamp_s, c->view.room_from_camera});
-      camera_centre_sum += c->view.room_from_camera.translation;
-      if (c->index % marker_step == 0) views.push_back(c->view);
-      if (c->index % recon_step == 0) {
-        const RgbdFrame frame = scan.LoadFrame(c->index, camera);
-        recon_reports.push_back(builder.AddFrame(DepthToCloud(frame, camera, depth_options), c->view.room_from_camera));
-      }
-    }
-    if (!posed.empty()) {
-      for (const auto& m : map.markers) {
-        const bool known = std::any_of(result_.marker_map.markers.begin(), result_.marker_map.markers.end(),
-                                       [&](const BodyMarkerEstimate& e) { return e.marker_id == m.marker_id; });
-        if (known) continue;
-        result_.marker_map.markers.push_back(m);
-        result_.marker_map.rejected.erase(m.marker_id);
-      }
-      std::sort(result_.marker_map.markers.begin(), result_.marker_map.markers.end(),
-                [](const BodyMarkerEstimate& a, const BodyMarkerEstimate& b) { return a.marker_id < b.marker_id; });
-      double sum = 0, worst = 0;
-      for (const auto& m : result_.marker_map.markers) sum += m.rms_px, worst = std::max(worst, m.rms_px);
-      result_.marker_map.mean_rms_px = sum / result_.marker_map.markers.size();
-      result_.marker_map.max_rms_px = worst;
-    }
-    std::sort(camera_poses.begin(), camera_poses.end(),
-              [](const StampedPose& a, const StampedPose& b) { return a.timestamp_s < b.timestamp_s; });
-    t_markers += SecondsSince(t0);
+    if (sticker_posed == 0) break;
+    map = BuildBodyMarkerMap(views_of(false), camera, round < 2 ? seed_options : map_options);
   }
+  if (sticker_posed > 0) {
+    // room_from_camera(room map) * camera_from_room(sticker frame), per frame,
+    // as a rotation vector and the shift of the stickers' centre.
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (const auto& m : map.markers) centre += m.room_from_marker.translation;
+    if (!map.markers.empty()) centre /= static_cast<double>(map.markers.size());
+    std::vector<Eigen::Matrix<double, 6, 1>> offsets;
+    for (const ScanFrame& f : frames) {
+      if (!f.localized || !f.posed) continue;
+      const Rigid3d d = f.room_from_camera * f.view.room_from_camera.Inverse();
+      Eigen::Matrix<double, 6, 1> v;
+      v << d.RotationVector(), d * centre - centre;
+      offsets.push_back(v);
+    }
+    Rigid3d room_from_sticker_frame;  // identity unless anchored below
+    if (!offsets.empty()) {
+      // Robust: frames whose offset is far beyond the median are left out.
+      std::vector<double> sizes;
+      for (const auto& v : offsets) sizes.push_back(v.tail<3>().norm());
+      std::vector<double> sorted = sizes;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double limit = 3 * sorted[sorted.size() / 2] + 0.002;
+      // Equal weights: the localiser's sigmas leave out map errors (two
+      // frames 0.05 deg apart by their sigmas differed by 0.4 deg), and
+      // weighting by them (capped at the median or not) measured no better
+      // than equal weights over 20 seeds.
+      Eigen::Matrix<double, 6, 1> mean = Eigen::Matrix<double, 6, 1>::Zero();
+      int used = 0;
+      for (size_t k = 0; k < offsets.size(); ++k) {
+        if (sizes[k] > limit) continue;
+        mean += offsets[k];
+        ++used;
+      }
+      if (used > 0) {
+        mean /= used;
+        const Rigid3d rotation = Rigid3d::FromRotationVector(mean.head<3>(), Eigen::Vector3d::Zero());
+        // Rotate about the centre, then shift it.
+        room_from_sticker_frame =
+            Rigid3d(rotation.rotation, centre + mean.tail<3>() - rotation * centre);
+      }
+    }
+    for (ScanFrame& f : frames) {
+      if (f.posed) {
+        f.view.room_from_camera = room_from_sticker_frame * f.view.room_from_camera;
+        f.room_from_camera = f.view.room_from_camera;
+      } else if (f.localized) {
+        f.view.room_from_camera = f.room_from_camera;  // fewer than two stickers: the room pose
+        f.posed = true;
+      }
+    }
+    result_.frames_posed_by_stickers = 0;
+    for (const ScanFrame& f : frames) result_.frames_posed_by_stickers += (f.posed && !f.localized) ? 1 : 0;
+    result_.marker_map = BuildBodyMarkerMap(views_of(false), camera, map_options);
+  } else {
+    // No frame has two mapped stickers: the room poses as they are.
+    for (ScanFrame& f : frames) {
+      f.posed = f.localized;
+      if (f.localized) f.view.room_from_camera = f.room_from_camera;
+    }
+    result_.marker_map = BuildBodyMarkerMap(views_of(false), camera, map_options);
+  }
+  t_markers += SecondsSince(t0);
   result_.times.localization_s = t_localize;
   result_.times.marker_map_s = t_markers;
+
+  // 3. Reconstruction from the final poses.
+  Step("fusing the depth", 0.6);
+  t0 = Clock::now();
+  std::vector<StampedPose> camera_poses;
+  Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
+  for (const ScanFrame& f : frames) {
+    if (!f.posed) continue;
+    camera_poses.push_back({f.timestamp_s, f.room_from_camera});
+    camera_centre_sum += f.room_from_camera.translation;
+    if (f.cloud) recon_reports.push_back(builder.AddFrame(*f.cloud, f.room_from_camera));
+  }
+  t_recon += SecondsSince(t0);
 
   // Couch and room removal: the couch top is the dominant plane facing the
   // cameras; keep what lies above it and its largest connected part.
@@ -327,9 +379,10 @@ void SessionController::Run() {
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t i = 0; i < fused.size(); ++i) centre += fused.points[i].head<3>();
     centre /= static_cast<double>(std::max<size_t>(1, fused.size()));
-    const Eigen::Vector3d shift = AnchorShift(recon_reports, centre);
-    fused.Transform(Rigid3d(Eigen::Quaterniond::Identity(), -shift));
-    result_.anchor_shift_m = shift;
+    const Rigid3d correction = AnchorCorrection(recon_reports, centre);
+    fused.Transform(correction.Inverse());
+    result_.anchor_shift_m = correction * centre - centre;
+    result_.anchor_rotation_deg = DegFromRad(correction.RotationVector().norm());
   }
   const Eigen::Vector3d box_centre = recon_options.crop_box->frame_from_box.translation;
   const Eigen::Vector3d towards_cameras =

@@ -2,13 +2,21 @@
 /// `arpos session`: the session stage of one treatment.
 ///
 /// From the case's body scan (patient lying still, wearing ArUco stickers):
-///  1. localise every used frame's camera in the plan's room map;
-///  2. body marker map: every sticker's pose in the room (body_model/);
-///  3. reconstruction: depth clouds placed by the camera poses, refined by
-///     GICP against the growing reconstruction (dynamic voxel size), cropped
-///     to the body (a box around the reference model at its target pose, the
-///     couch plane and everything under it removed, largest cluster), then
-///     meshed by Poisson;
+///  1. localise every used frame's camera in the plan's room map and detect
+///     its stickers;
+///  2. stickers and cameras made consistent: a seed sticker map from the
+///     room-localised frames, every frame with two or more mapped stickers
+///     posed from them and the map rebuilt (three rounds), then the one
+///     rigid offset between that sticker-consistent frame and the room as
+///     the robust mean of what the room-localised frames say (a frame close
+///     over the body sees room markers far and oblique: its room pose alone
+///     is uncertain by 5-20 mm); the body marker map from the final poses
+///     (body_model/);
+///  3. reconstruction: depth clouds placed by those poses, refined by GICP
+///     against the growing reconstruction (dynamic voxel size), the frames'
+///     mean correction taken off, cropped to the body (a box around the
+///     reference model at its target pose, the couch plane and everything
+///     under it removed, largest cluster), then meshed by Poisson;
 ///  4. alignment of the reference model to the reconstruction: manual (a
 ///     given 4x4) or automatic (global registration with the target pose as
 ///     prior, ambiguity reported), each refined by point-to-plane ICP of the
@@ -53,9 +61,8 @@ struct SessionStageOptions {
   /// uses smaller steps (at least kMinFramesPerStep frames, or all).
   int marker_frame_step = 2;
   int reconstruction_frame_step = 10;
-  /// Take the mean shift of the reconstruction's frames' GICP corrections
-  /// off the fused cloud (it otherwise carries the first frame's
-  /// localisation error).
+  /// Take the mean of the reconstruction frames' GICP corrections off the
+  /// fused cloud (it otherwise carries the first frame's pose error).
   bool average_anchor = true;
   int poisson_depth = 8;
   int threads = 2;
@@ -89,18 +96,21 @@ struct SessionStageResult {
   Rigid3d room_from_model;       ///< reference model pose at scan time
   double alignment_fitness = 0, alignment_rmse_m = 0;
   std::map<int, Rigid3d> model_from_markers;
-  /// Shift taken off the reconstruction (zero when not applied), metres.
+  /// The mean correction taken off the reconstruction (none when not
+  /// applied): the shift of its centre (m) and the rotation (deg).
   Eigen::Vector3d anchor_shift_m = Eigen::Vector3d::Zero();
+  double anchor_rotation_deg = 0;
   SessionStepTimes times;
   std::string Summary() const;
 };
 
 struct ReconstructionFrameReport;
-/// The mean shift of `centre` by the frames' GICP corrections (the first
-/// fused frame counts as none; refused and outlying corrections left out);
-/// zero with fewer than three frames.
-Eigen::Vector3d AnchorShift(const std::vector<ReconstructionFrameReport>& reports,
-                            const Eigen::Vector3d& centre);
+/// The mean of the reconstruction frames' GICP corrections as a rotation
+/// about `centre` plus a shift of it (the first fused frame counts as none;
+/// refused corrections and shifts far beyond the median left out); identity
+/// with fewer than three frames.
+Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
+                         const Eigen::Vector3d& centre);
 
 class SessionController : public Controller {
  public:

@@ -25,7 +25,7 @@ fs::path CopySample(const TempDir& dir) {
   return to;
 }
 
-TEST(AnchorShift, MeanOfTheRefinedFramesWithOutliersAndUnrefinedLeftOut) {
+TEST(AnchorCorrection, MeanOfTheRefinedFramesWithOutliersAndUnrefinedLeftOut) {
   const Eigen::Vector3d centre(0.7, 1.4, 0.9);
   auto report = [](bool used, bool refined, const Rigid3d& correction) {
     ReconstructionFrameReport r;
@@ -46,30 +46,39 @@ TEST(AnchorShift, MeanOfTheRefinedFramesWithOutliersAndUnrefinedLeftOut) {
       report(true, true, shift(0.002, -0.003, 0)),
       report(true, true, shift(0.2, 0, 0)),        // outlier
   };
-  const Eigen::Vector3d s = AnchorShift(reports, centre);
-  EXPECT_NEAR(s.x(), 0.008 / 4, 1e-12);
-  EXPECT_NEAR(s.y(), 0.0, 1e-12);
-  EXPECT_NEAR(s.z(), 0.0, 1e-12);
-  // A rotation about the room origin moves the centre: its shift there counts.
-  const Rigid3d turn = Rigid3d::FromRotationVector(Eigen::Vector3d(0, 0, 0.001), Eigen::Vector3d::Zero());
+  Rigid3d c = AnchorCorrection(reports, centre);
+  EXPECT_NEAR((c.translation - Eigen::Vector3d(0.002, 0, 0)).norm(), 0, 1e-12);
+  EXPECT_NEAR(c.RotationVector().norm(), 0, 1e-12);
+  // Rotations about the room origin: the mean rotation, and the mean shift
+  // of the centre.
+  const Rigid3d turn = Rigid3d::FromRotationVector(Eigen::Vector3d(0, 0, 0.002), Eigen::Vector3d::Zero());
   reports = {report(true, false, Rigid3d::Identity()), report(true, true, turn), report(true, true, turn),
              report(true, true, turn)};
-  EXPECT_NEAR((AnchorShift(reports, centre) - 0.75 * (turn * centre - centre)).norm(), 0, 1e-12);
+  c = AnchorCorrection(reports, centre);
+  EXPECT_NEAR((c.RotationVector() - Eigen::Vector3d(0, 0, 0.0015)).norm(), 0, 1e-9);
+  EXPECT_NEAR((c * centre - centre - 0.75 * (turn * centre - centre)).norm(), 0, 1e-9);
   // Fewer than three frames: nothing to average.
   reports.resize(2);
-  EXPECT_EQ(AnchorShift(reports, centre), Eigen::Vector3d::Zero());
+  c = AnchorCorrection(reports, centre);
+  EXPECT_EQ(c.translation, Eigen::Vector3d::Zero());
+  EXPECT_NEAR(c.RotationVector().norm(), 0, 1e-15);
+}
+
+// run-case on `case_dir` into `db`; session outputs into `out_dir` if given.
+RunCaseResult RunCase(const fs::path& case_dir, Database* db, std::optional<fs::path> out_dir = std::nullopt) {
+  RunCaseOptions options;
+  options.case_dir = case_dir;
+  options.out_dir = out_dir;
+  RunCaseController run(options, db);
+  run.Run();
+  return run.result();
 }
 
 TEST(SessionStage, SampleSessionGivesStickersReconstructionAndModelPose) {
   TempDir dir;
   const fs::path case_dir = CopySample(dir);
   auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
-  RunCaseOptions options;
-  options.case_dir = case_dir;
-  options.out_dir = dir.path() / "out";
-  RunCaseController run(options, db.get());
-  run.Run();
-  const RunCaseResult& r = run.result();
+  const RunCaseResult r = RunCase(case_dir, db.get(), dir.path() / "out");
   ASSERT_TRUE(r.ok()) << r.Summary();
   EXPECT_NE(r.session_summary.find("more posed from the stickers"), std::string::npos);
   const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
@@ -90,11 +99,7 @@ TEST(SessionStage, ScanWithoutABodyIsAClearErrorAndStoresNoSession) {
   fs::copy(case_dir / "room", case_dir / "body_scan", fs::copy_options::recursive);
   // Body ground truth is optional; without it the case stays valid.
   auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
-  RunCaseOptions options;
-  options.case_dir = case_dir;
-  RunCaseController run(options, db.get());
-  run.Run();
-  const RunCaseResult& r = run.result();
+  const RunCaseResult r = RunCase(case_dir, db.get());
   ASSERT_FALSE(r.ok());
   ASSERT_EQ(r.failures.size(), 1u) << r.Summary();
   EXPECT_NE(r.failures.front().find("body_scan"), std::string::npos) << r.failures.front();
@@ -108,11 +113,8 @@ TEST(SessionStage, ManualAlignmentThatIsNotRigidIsRefusedNamingTheFile) {
   TempDir dir;
   const fs::path case_dir = CopySample(dir);
   auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
-  RunCaseOptions options;
-  options.case_dir = case_dir;
-  RunCaseController run(options, db.get());
-  run.Run();
-  ASSERT_TRUE(run.result().ok()) << run.result().Summary();
+  const RunCaseResult run = RunCase(case_dir, db.get());
+  ASSERT_TRUE(run.ok()) << run.Summary();
   const fs::path bad = dir.path() / "initial.txt";
   WriteFileAtomic(bad, "2 0 0 0.7\n0 1 0 1.3\n0 0 1 0.9\n0 0 0 1\n");
   SessionStageOptions session;
@@ -126,7 +128,7 @@ TEST(SessionStage, ManualAlignmentThatIsNotRigidIsRefusedNamingTheFile) {
     EXPECT_NE(std::string(e.what()).find(bad.string()), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("not a rigid transform"), std::string::npos) << e.what();
   }
-  EXPECT_EQ(db->ListSessions(run.result().plan_id).size(), 1u);  // only run-case's
+  EXPECT_EQ(db->ListSessions(run.plan_id).size(), 1u);  // only run-case's
 }
 
 }  // namespace
