@@ -2,7 +2,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <cstdlib>
 #include <sstream>
 
 #include "geometry/mesh_io.h"
@@ -397,6 +396,7 @@ void SessionController::Run() {
   t_recon += SecondsSince(t0);
   result_.times.reconstruction_s = t_recon;
   result_.reconstruction_points = static_cast<int>(body.size());
+  result_.reconstruction = body;
   if (body.size() < 500) {
     ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
                       << ": no usable body surface in the scan (" << body.size()

@@ -39,6 +39,7 @@
 #include "controllers/controller.h"
 #include "geometry/rigid3.h"
 #include "geometry/triangle_mesh.h"
+#include "registration/point_cloud.h"
 #include "store/records.h"
 
 namespace arpos {
@@ -90,6 +91,8 @@ struct SessionStageResult {
   int frames_posed_by_stickers = 0;
   BodyMarkerMapResult marker_map;
   int reconstruction_points = 0;
+  /// The fused body surface (room frame at scan time), as stored.
+  PointCloud reconstruction;
   int mesh_vertices = 0;
   std::string alignment_method;  ///< "manual" or "automatic"
   std::string alignment_status;  ///< ok, or why the automatic result is doubtful

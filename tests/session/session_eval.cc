@@ -1,0 +1,125 @@
+// session_eval: accuracy of the session stage on a simulated case (not a
+// test; prints a report). Runs run-case (plan + session) into a temporary
+// store, then the session stage again to get its in-memory result, and
+// compares with simulation.yaml and body_scan/body_groundtruth.txt:
+//   - body-marker (sticker) positions: estimated room_from_marker at scan
+//     time against the truth (mm), and their orientation (deg);
+//   - reconstruction surface error: distance of every reconstruction point
+//     to the true body surface (the reference model at the true pose,
+//     sampled every 0.5 mm; the model carries 0.3 mm of simulated noise);
+//   - model pose at scan time against body_groundtruth.txt;
+//   - the stage's step times.
+//
+//   session_eval CASE_DIR
+#include <algorithm>
+#include <cstdio>
+#include <iostream>
+
+#include "controllers/run_case_controller.h"
+#include "controllers/session_controller.h"
+#include "geometry/mesh_io.h"
+#include "geometry/pose_error.h"
+#include "registration/kdtree.h"
+#include "registration/mesh_cloud.h"
+#include "sensor/tum_io.h"
+#include "simulation/simulation_truth.h"
+#include "store/sqlite_database.h"
+#include "util/check.h"
+#include "util/file.h"
+
+using namespace arpos;
+
+namespace {
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+double Mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0 : s / v.size();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2 || std::string(argv[1]) == "--help") {
+    std::cerr << "usage: session_eval CASE_DIR\n";
+    return 2;
+  }
+  try {
+    const std::filesystem::path case_dir = argv[1];
+    TempDir dir;
+    auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+    RunCaseOptions run_options;
+    run_options.case_dir = case_dir;
+    run_options.read_all_images = false;
+    RunCaseController run(run_options, db.get());
+    run.Run();
+    if (!run.result().ok()) {
+      std::cerr << run.result().Summary();
+      return 1;
+    }
+    SessionStageOptions options;
+    options.case_dir = case_dir;
+    options.plan_id = run.result().plan_id;
+    SessionController session(options, db.get());
+    session.Run();
+    const SessionStageResult& r = session.result();
+    std::cout << r.Summary();
+
+    const sim::SimulationTruth truth = sim::LoadSimulationTruth(case_dir / "simulation.yaml");
+    const auto gt = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
+    ARPOS_CHECK(!gt.empty(), "no body ground truth");
+    const Rigid3d room_from_model = gt.front().room_from_x;
+
+    // Stickers.
+    std::vector<double> sticker_mm, sticker_deg, model_sticker_mm, model_sticker_deg;
+    for (const auto& e : r.marker_map.markers) {
+      for (const auto& m : truth.body_markers) {
+        if (m.id != e.marker_id) continue;
+        const PoseError err = ComputePoseError(room_from_model * m.parent_from_marker, e.room_from_marker);
+        sticker_mm.push_back(err.translation_mm);
+        sticker_deg.push_back(err.rotation_deg);
+        // What tracking uses: the sticker in the model frame.
+        const PoseError rel = ComputePoseError(m.parent_from_marker, r.model_from_markers.at(e.marker_id));
+        model_sticker_mm.push_back(rel.translation_mm);
+        model_sticker_deg.push_back(rel.rotation_deg);
+      }
+    }
+    std::printf("stickers: %zu mapped of %zu on the body; position error mean %.2f mm, median %.2f, max %.2f; "
+                "orientation mean %.2f deg, max %.2f\n",
+                sticker_mm.size(), truth.body_markers.size(), Mean(sticker_mm), Percentile(sticker_mm, 0.5),
+                Percentile(sticker_mm, 1.0), Mean(sticker_deg), Percentile(sticker_deg, 1.0));
+
+    std::printf("stickers in the model frame (model_from_marker, what tracking uses): position error mean "
+                "%.2f mm, max %.2f; orientation mean %.2f deg, max %.2f\n",
+                Mean(model_sticker_mm), Percentile(model_sticker_mm, 1.0), Mean(model_sticker_deg),
+                Percentile(model_sticker_deg, 1.0));
+
+    // Reconstruction surface error against the true surface.
+    const TriangleMesh model = LoadTriangleMesh(case_dir / "reference_model.ply");
+    PointCloud surface = SampleMeshSurface(model, 0.0005);
+    surface.Transform(room_from_model);
+    const KdTree tree(surface);
+    std::vector<double> dist_mm;
+    for (size_t i = 0; i < r.reconstruction.size(); ++i) {
+      size_t index;
+      double sq;
+      if (tree.Nearest(r.reconstruction.points[i], &index, &sq)) dist_mm.push_back(1000 * std::sqrt(sq));
+    }
+    std::printf("reconstruction: %zu points; distance to the true surface mean %.2f mm, median %.2f, p95 %.2f, "
+                "max %.2f\n",
+                dist_mm.size(), Mean(dist_mm), Percentile(dist_mm, 0.5), Percentile(dist_mm, 0.95),
+                Percentile(dist_mm, 1.0));
+    const PoseError pose = ComputePoseError(room_from_model, r.room_from_model);
+    std::printf("model pose at scan time: %.2f mm, %.3f deg\n", pose.translation_mm, pose.rotation_deg);
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "session_eval: " << e.what() << "\n";
+    return 1;
+  }
+}
