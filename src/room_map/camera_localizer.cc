@@ -60,6 +60,9 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (!(search_radius_px > 0) || !(refined_search_radius_px > 0) || !(wide_search_radius_px > 0))
     out << "search radii must be positive";
   else if (recent_pose_max_frames < 0) out << "recent_pose_max_frames must not be negative";
+  else if (!(max_camera_speed_m_s > 0) || !(max_camera_jump_margin_m >= 0) || !(max_camera_turn_deg_s > 0) ||
+           !(max_camera_turn_margin_deg >= 0))
+    out << "camera speed limits must be positive";
   else if (max_hamming < 1 || max_hamming > 256 || relocalisation_max_hamming < 1 || relocalisation_max_hamming > 256)
     out << "Hamming thresholds must be in 1..256";
   else if (!(match_ratio > 0 && match_ratio <= 1) || !(relocalisation_ratio > 0 && relocalisation_ratio <= 1))
@@ -608,6 +611,25 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       if (ok) out.status = LocalizationStatus::kRelocalized;
     }
   }
+  if (ok && out.status == LocalizationStatus::kRelocalized && out.markers_used == 0 && m.have_last &&
+      m.frames_lost <= options_.recent_pose_max_frames) {
+    // Keypoints alone: plausible only within reach of the last pose.
+    const double dt = std::abs(frame.timestamp_s - m.last_t);
+    const Rigid3d last_room_from_camera = m.last_camera_from_room.Inverse();
+    const Rigid3d now_room_from_camera = refined.camera_from_room.Inverse();
+    const double jump_m = (now_room_from_camera.translation - last_room_from_camera.translation).norm();
+    const double turn_deg =
+        DegFromRad(RotationVectorFromQuaternion(now_room_from_camera.rotation * last_room_from_camera.rotation.inverse()).norm());
+    const double reach_m = options_.max_camera_speed_m_s * dt + options_.max_camera_jump_margin_m;
+    const double reach_deg = options_.max_camera_turn_deg_s * dt + options_.max_camera_turn_margin_deg;
+    if (jump_m > reach_m || turn_deg > reach_deg) {
+      ok = false;
+      std::ostringstream why;
+      why << "relocalised by keypoints alone " << jump_m << " m / " << turn_deg << " deg from the pose "
+          << dt << " s before: beyond a hand-held camera's reach; refused";
+      out.message = why.str();
+    }
+  }
   if (ok) {
     out.ok = true;
     out.room_from_camera = refined.camera_from_room.Inverse();
@@ -631,10 +653,12 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     ++m.frames_lost;
     m.have_prev = false;
     m.have_cov = false;
-    std::ostringstream why;
-    why << m.markers.size() << " map marker(s) and " << m.keypoints.size()
-        << " keypoints found; too few agree on a pose";
-    out.message = why.str();
+    if (out.message.empty()) {
+      std::ostringstream why;
+      why << m.markers.size() << " map marker(s) and " << m.keypoints.size()
+          << " keypoints found; too few agree on a pose";
+      out.message = why.str();
+    }
   }
   out.markers = m.markers;
   tm.total_ms = ThreadCpuMs() - start;

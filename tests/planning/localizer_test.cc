@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <optional>
+
 #include "geometry/pose_error.h"
 #include "planning/planning_test_util.h"
 #include "room_map/camera_localizer.h"
@@ -64,6 +66,46 @@ TEST(Localizer, TrackingFramesWithinTolerance) {
   }
   EXPECT_LT(sum_mm / ok, 3.0);
   EXPECT_LT(sum_deg / ok, 0.15);
+}
+
+// Keypoints alone can agree on a wrong place (repeated texture); a
+// relocalised pose beyond a hand-held camera's reach from a pose moments
+// ago is refused, and accepted when enough time has passed.
+TEST(Localizer, KeypointRelocalisationBeyondReachOfARecentPoseIsRefused) {
+  const auto& c = GetSmallCase();
+  const CameraIntrinsics& K = c.folder.config.camera;
+  CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+  options.use_markers = false;  // keypoints only
+  const Sequence seq = Sequence::Open(c.folder.room_dir);
+  const auto gt = *seq.CameraGroundTruth();
+  // Two frames each localisable alone, at least 0.5 m apart.
+  const RgbdFrame a = seq.LoadFrame(0, K);
+  {
+    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
+    ASSERT_TRUE(alone.Localize(a).ok);
+  }
+  std::optional<RgbdFrame> b;
+  for (size_t i = seq.size() / 2; i < seq.size() && !b; ++i) {
+    if ((gt[i].room_from_x.translation - gt[0].room_from_x.translation).norm() < 0.5) continue;
+    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
+    RgbdFrame frame = seq.LoadFrame(i, K);
+    if (alone.Localize(frame).ok) b = frame;
+  }
+  ASSERT_TRUE(b.has_value()) << "no far frame localisable by keypoints alone";
+
+  CameraLocalizer localizer(GetSmallCaseMap().map, K, options);
+  ASSERT_TRUE(localizer.Localize(a).ok);
+  RgbdFrame soon = *b;
+  soon.timestamp_s = a.timestamp_s + 1.0 / 30;
+  const LocalizationResult refused = localizer.Localize(soon);
+  EXPECT_FALSE(refused.ok);
+  EXPECT_NE(refused.message.find("reach"), std::string::npos) << refused.message;
+
+  CameraLocalizer later_localizer(GetSmallCaseMap().map, K, options);
+  ASSERT_TRUE(later_localizer.Localize(a).ok);
+  RgbdFrame later = *b;
+  later.timestamp_s = a.timestamp_s + 5.0;
+  EXPECT_TRUE(later_localizer.Localize(later).ok);
 }
 
 TEST(Localizer, FrameWithoutMarkersOrTextureIsLostAndTrackingRecovers) {
