@@ -19,6 +19,7 @@
 #include <fstream>
 
 #include "controllers/run_case_controller.h"
+#include "controllers/session_controller.h"
 #include "geometry/so3.h"
 #include "sensor/case_check.h"
 #include "sensor/case_folder.h"
@@ -215,22 +216,48 @@ void PlanningPage::ImportCase() {
 
 SessionPage::SessionPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
   setTitle(tr("Session"));
-  setSubTitle(tr("Treatment sessions of the plans in the store: body marker map, reconstruction and "
-                 "alignment of the reference model."));
+  setSubTitle(tr("Treatment sessions: body marker map, reconstruction of today's body surface (grey) and "
+                 "the reference model aligned to it (red), with the planned pose (blue)."));
   sessions_ = new QTableWidget(this);
   sessions_->setColumnCount(5);
   sessions_->setHorizontalHeaderLabels({tr("Session"), tr("Plan"), tr("Fraction"), tr("Started (UTC)"), tr("Status")});
   sessions_->horizontalHeader()->setStretchLastSection(true);
   sessions_->setEditTriggers(QAbstractItemView::NoEditTriggers);
+  sessions_->setSelectionBehavior(QAbstractItemView::SelectRows);
+  sessions_->setSelectionMode(QAbstractItemView::SingleSelection);
+  sessions_->setMaximumHeight(150);
+  connect(sessions_, &QTableWidget::currentCellChanged, this, [this](int row, int, int, int) { ShowSession(row); });
+  model_view_ = new ModelView(this);
+  details_ = new QLabel(this);
+  details_->setWordWrap(true);
+  details_->setTextInteractionFlags(Qt::TextSelectableByMouse);
   stages_ = new QLabel(this);
   stages_->setWordWrap(true);
+  run_button_ = new QPushButton(tr("Run the session stage on the case's body scan"), this);
+  progress_ = new QProgressBar(this);
+  progress_->setRange(0, 100);
+  connect(run_button_, &QPushButton::clicked, this, &SessionPage::RunSessionStage);
+  connect(state->worker, &Worker::Progress, this, [this](QString step, double fraction) {
+    progress_->setValue(static_cast<int>(100 * fraction));
+    progress_->setFormat(step + " %p%");
+  });
   auto* layout = new QVBoxLayout(this);
-  layout->addWidget(sessions_, 1);
+  layout->addWidget(sessions_);
+  layout->addWidget(model_view_, 1);
+  layout->addWidget(details_);
   layout->addWidget(stages_);
+  auto* row = new QHBoxLayout;
+  row->addWidget(run_button_);
+  row->addWidget(progress_, 1);
+  layout->addLayout(row);
 }
 
-void SessionPage::initializePage() {
+void SessionPage::initializePage() { ListSessions(); }
+
+void SessionPage::ListSessions() {
   sessions_->setRowCount(0);
+  model_view_->ClearMeshes();
+  details_->clear();
   if (!state_->database) return;
   const auto sessions = state_->database->ListSessions(std::nullopt, 50);
   sessions_->setRowCount(static_cast<int>(sessions.size()));
@@ -247,6 +274,95 @@ void SessionPage::initializePage() {
                        .arg(info.RowCount("body_marker_maps"))
                        .arg(info.RowCount("reconstructions"))
                        .arg(info.RowCount("alignments")));
+  if (!sessions.empty()) sessions_->selectRow(0);  // the newest
+}
+
+void SessionPage::ShowSession(int row) {
+  model_view_->ClearMeshes();
+  details_->clear();
+  if (!state_->database || row < 0 || !sessions_->item(row, 0)) return;
+  const SessionId session(sessions_->item(row, 0)->text().toLongLong());
+  const PlanId plan_id(sessions_->item(row, 1)->text().toLongLong());
+  QStringList lines;
+  const auto plan = state_->database->GetPlan(plan_id);
+  TriangleMesh model;
+  if (plan) model = FromStoredMesh(plan->reference_model);
+  const auto maps = state_->database->ListBodyMarkerMapIds(session);
+  if (!maps.empty()) {
+    if (const auto map = state_->database->GetBodyMarkerMap(maps.back())) {
+      lines << tr("Body marker map: %1 stickers, corner residual mean %2 px, max %3 px.")
+                   .arg(map->markers.size())
+                   .arg(map->mean_residual_px, 0, 'f', 3)
+                   .arg(map->max_residual_px, 0, 'f', 3);
+    }
+  }
+  const auto reconstructions = state_->database->ListReconstructionIds(session);
+  if (reconstructions.empty()) {
+    lines << tr("No reconstruction stored for this session.");
+  } else if (const auto recon = state_->database->GetReconstruction(reconstructions.back())) {
+    lines << tr("Reconstruction: %1 points from %2 frames%3.")
+                 .arg(recon->cloud.points.size())
+                 .arg(recon->num_frames_used)
+                 .arg(recon->mesh ? tr(", mesh of %1 triangles").arg(recon->mesh->faces.size()) : QString());
+    if (recon->mesh) {
+      model_view_->SetMesh("reconstruction", FromStoredMesh(*recon->mesh), Rigid3d::Identity(), 0.75, 0.75, 0.72);
+    }
+    const auto alignments = state_->database->ListAlignments(recon->id);
+    if (!alignments.empty() && plan) {
+      const AlignmentRecord& final_alignment = alignments.back();
+      const Rigid3d& room_from_model = final_alignment.reconstruction_from_model;
+      model_view_->SetMesh("aligned", model, room_from_model, 0.9, 0.25, 0.2, 0.55);
+      model_view_->SetMesh("target", model, plan->room_from_model_target, 0.25, 0.45, 0.95, 0.35);
+      // The couch correction that would bring today's pose to the plan's, at
+      // the isocentre (the model origin), in room axes.
+      const Eigen::Vector3d shift_mm =
+          1000 * (plan->room_from_model_target.translation - room_from_model.translation);
+      const Eigen::Vector3d turn_deg =
+          (plan->room_from_model_target * room_from_model.Inverse()).RotationVector() * (180.0 / M_PI);
+      lines << tr("Final alignment: %1 (%2 stored for this reconstruction): fitness %3, RMSE %4 mm. %5")
+                   .arg(Q(ToString(final_alignment.method)))
+                   .arg(alignments.size())
+                   .arg(final_alignment.fitness, 0, 'f', 3)
+                   .arg(1000 * final_alignment.rmse_m, 0, 'f', 2)
+                   .arg(Q(final_alignment.options));
+      lines << tr("To reach the planned pose at scan time: shift (%1, %2, %3) mm, rotate (%4, %5, %6) deg "
+                  "about the isocentre, room axes.")
+                   .arg(shift_mm.x(), 0, 'f', 1)
+                   .arg(shift_mm.y(), 0, 'f', 1)
+                   .arg(shift_mm.z(), 0, 'f', 1)
+                   .arg(turn_deg.x(), 0, 'f', 2)
+                   .arg(turn_deg.y(), 0, 'f', 2)
+                   .arg(turn_deg.z(), 0, 'f', 2);
+    }
+  }
+  details_->setText(lines.join("\n"));
+  model_view_->ResetCamera();
+}
+
+void SessionPage::RunSessionStage() {
+  if (state_->options.case_dir.empty()) {
+    QMessageBox::warning(this, tr("Session"), tr("Choose a case folder on the first page."));
+    return;
+  }
+  run_button_->setEnabled(false);
+  const std::string store_path = state_->options.store_path;
+  const std::string case_dir = state_->options.case_dir;
+  auto connection = std::make_shared<QMetaObject::Connection>();
+  *connection = connect(state_->worker, &Worker::Finished, this, [this, connection](bool ok, QString message) {
+    disconnect(*connection);
+    run_button_->setEnabled(true);
+    if (!ok) QMessageBox::critical(this, tr("Session stage failed"), message);
+    ListSessions();
+  });
+  state_->worker->Start([store_path, case_dir](const ControllerCallbacks& callbacks) {
+    auto database = SqliteDatabase::Open(store_path);
+    SessionStageOptions options;
+    options.case_dir = case_dir;
+    options.actor = "arpos gui";
+    SessionController controller(options, database.get(), callbacks);
+    controller.Run();
+    return controller.result().Summary();
+  });
 }
 
 // ---------------------------------------------------------------- tracking

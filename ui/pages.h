@@ -61,9 +61,16 @@ class SessionPage : public QWizardPage {
   void initializePage() override;
 
  private:
+  void ListSessions();
+  void ShowSession(int row);
+  void RunSessionStage();
   WizardState* state_;
   QTableWidget* sessions_;
+  ModelView* model_view_;
+  QLabel* details_;
   QLabel* stages_;
+  QPushButton* run_button_;
+  QProgressBar* progress_;
 };
 
 class TrackingPage : public QWizardPage {

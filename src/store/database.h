@@ -108,6 +108,9 @@ class Database {
 
   virtual ReconstructionId AddReconstruction(const ReconstructionRecord& reconstruction) = 0;
   virtual std::optional<ReconstructionRecord> GetReconstruction(ReconstructionId id) = 0;
+  /// Ids of a session's body marker maps and reconstructions, oldest first.
+  virtual std::vector<BodyMarkerMapId> ListBodyMarkerMapIds(SessionId session) = 0;
+  virtual std::vector<ReconstructionId> ListReconstructionIds(SessionId session) = 0;
 
   virtual AlignmentId AddAlignment(const AlignmentRecord& alignment) = 0;
   virtual std::optional<AlignmentRecord> GetAlignment(AlignmentId id) = 0;

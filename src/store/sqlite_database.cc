@@ -647,6 +647,24 @@ std::optional<ReconstructionRecord> SqliteDatabase::GetReconstruction(Reconstruc
   return reconstruction;
 }
 
+std::vector<BodyMarkerMapId> SqliteDatabase::ListBodyMarkerMapIds(SessionId session) {
+  SqliteStatementGuard s(Prepared(
+      "SELECT body_marker_map_id FROM body_marker_maps WHERE session_id = ?1 ORDER BY body_marker_map_id"));
+  s->BindId(1, session);
+  std::vector<BodyMarkerMapId> ids;
+  while (s->Step()) ids.emplace_back(s->ColumnInt64(0));
+  return ids;
+}
+
+std::vector<ReconstructionId> SqliteDatabase::ListReconstructionIds(SessionId session) {
+  SqliteStatementGuard s(Prepared(
+      "SELECT reconstruction_id FROM reconstructions WHERE session_id = ?1 ORDER BY reconstruction_id"));
+  s->BindId(1, session);
+  std::vector<ReconstructionId> ids;
+  while (s->Step()) ids.emplace_back(s->ColumnInt64(0));
+  return ids;
+}
+
 // ---------------------------------------------------------------- alignments
 
 AlignmentId SqliteDatabase::AddAlignment(const AlignmentRecord& alignment) {

@@ -81,6 +81,8 @@ class SqliteDatabase final : public Database {
 
   ReconstructionId AddReconstruction(const ReconstructionRecord& reconstruction) override;
   std::optional<ReconstructionRecord> GetReconstruction(ReconstructionId id) override;
+  std::vector<BodyMarkerMapId> ListBodyMarkerMapIds(SessionId session) override;
+  std::vector<ReconstructionId> ListReconstructionIds(SessionId session) override;
 
   AlignmentId AddAlignment(const AlignmentRecord& alignment) override;
   std::optional<AlignmentRecord> GetAlignment(AlignmentId id) override;

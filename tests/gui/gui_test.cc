@@ -83,5 +83,31 @@ TEST_F(GuiTest, PlanningPageRendersTheReferenceModelInBlue) {
   EXPECT_GT(blue, 300);
 }
 
+// After run-case on the sample session, the session page shows the
+// reconstruction with the reference model aligned to it in red.
+TEST_F(GuiTest, SessionPageShowsTheAlignedModelInRed) {
+  const auto sample = std::filesystem::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion";
+  const auto session_store = dir_.path() / "session.db";
+  std::string out;
+  ASSERT_EQ(RunArpos("run-case " + sample.string() + " --store " + session_store.string(), &out), 0) << out;
+  const auto png = dir_.path() / "session_page.png";
+  out.clear();
+  ASSERT_EQ(RunArpos("gui --store " + session_store.string() + " --case " + sample.string() +
+                         " --page 2 --screenshot " + png.string(),
+                     &out),
+            0)
+      << out;
+  const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(shot.empty());
+  int red = 0;
+  for (int y = 0; y < shot.rows; ++y) {
+    for (int x = 0; x < shot.cols; ++x) {
+      const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
+      if (p[2] > p[0] + 50 && p[2] > p[1] + 50) ++red;
+    }
+  }
+  EXPECT_GT(red, 300);
+}
+
 }  // namespace
 }  // namespace arpos

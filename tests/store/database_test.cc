@@ -78,6 +78,10 @@ TEST_P(StoreKindTest, SeveralCasesKeepTheirOwnRows) {
   EXPECT_NE(a.plan.id, b.plan.id);
   test::ExpectFullStoreEq(*db, a);
   test::ExpectFullStoreEq(*db, b);
+  // A session lists its own body marker maps and reconstructions only.
+  EXPECT_EQ(db->ListBodyMarkerMapIds(a.session.id), std::vector<BodyMarkerMapId>{a.body_marker_map.id});
+  EXPECT_EQ(db->ListReconstructionIds(b.session.id), std::vector<ReconstructionId>{b.reconstruction.id});
+  EXPECT_TRUE(db->ListReconstructionIds(SessionId(999)).empty());
   EXPECT_EQ(db->ListPlans().size(), 2u);
   EXPECT_EQ(db->ListPlans(a.patient.id).size(), 1u);
   EXPECT_EQ(db->ListPlans(a.patient.id)[0].id, a.plan.id);
