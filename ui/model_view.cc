@@ -5,7 +5,10 @@
 #include <map>
 #include <vtkActor.h>
 #include <vtkAxesActor.h>
+#include <vtkCallbackCommand.h>
 #include <vtkCellArray.h>
+#include <vtkCellPicker.h>
+#include <vtkRenderWindowInteractor.h>
 #include <vtkGenericOpenGLRenderWindow.h>
 #include <vtkNew.h>
 #include <vtkPoints.h>
@@ -23,6 +26,9 @@ struct ModelView::Impl {
   vtkNew<vtkGenericOpenGLRenderWindow> window;
   vtkNew<vtkRenderer> renderer;
   std::map<std::string, vtkSmartPointer<vtkActor>> actors;
+  std::map<std::string, Rigid3d> room_from_mesh;
+  vtkNew<vtkCellPicker> picker;
+  vtkNew<vtkCallbackCommand> click;
   vtkSmartPointer<vtkAxesActor> axes;
 };
 
@@ -37,6 +43,30 @@ ModelView::ModelView(QWidget* parent) : QWidget(parent), impl_(std::make_unique<
   impl_->renderer->GradientBackgroundOn();
   layout->addWidget(impl_->widget);
   setMinimumSize(320, 240);
+  impl_->picker->SetTolerance(0.002);
+  impl_->click->SetClientData(this);
+  impl_->click->SetCallback([](vtkObject* caller, unsigned long, void* client, void*) {
+    auto* interactor = static_cast<vtkRenderWindowInteractor*>(caller);
+    if (!interactor->GetShiftKey()) return;  // plain clicks turn the view
+    static_cast<ModelView*>(client)->PickAt(interactor->GetEventPosition()[0], interactor->GetEventPosition()[1]);
+  });
+  if (auto* interactor = impl_->window->GetInteractor()) {
+    interactor->AddObserver(vtkCommand::LeftButtonPressEvent, impl_->click, 1.0);
+  }
+}
+
+void ModelView::PickAt(int x, int y) {
+  impl_->click->SetAbortFlag(1);  // a pick, not the start of a camera turn
+  if (!impl_->picker->Pick(x, y, 0, impl_->renderer)) return;
+  vtkActor* actor = impl_->picker->GetActor();
+  for (const auto& [slot, a] : impl_->actors) {
+    if (a.Get() != actor) continue;
+    double p[3];
+    impl_->picker->GetPickPosition(p);
+    const Eigen::Vector3d room(p[0], p[1], p[2]);
+    emit Picked(QString::fromStdString(slot), room, impl_->room_from_mesh[slot].Inverse() * room);
+    return;
+  }
 }
 
 ModelView::~ModelView() = default;
@@ -62,6 +92,7 @@ void ModelView::SetMesh(const std::string& slot, const TriangleMesh& mesh, const
   normals->SplittingOff();
   vtkNew<vtkPolyDataMapper> mapper;
   mapper->SetInputConnection(normals->GetOutputPort());
+  impl_->room_from_mesh[slot] = room_from_model;
   auto& actor = impl_->actors[slot];
   if (actor) impl_->renderer->RemoveActor(actor);
   actor = vtkSmartPointer<vtkActor>::New();
@@ -75,6 +106,7 @@ void ModelView::SetMesh(const std::string& slot, const TriangleMesh& mesh, const
 void ModelView::ClearMeshes() {
   for (auto& [slot, actor] : impl_->actors) impl_->renderer->RemoveActor(actor);
   impl_->actors.clear();
+  impl_->room_from_mesh.clear();
   impl_->window->Render();
 }
 

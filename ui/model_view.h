@@ -4,6 +4,7 @@
 /// class, so that no other file includes VTK headers.
 
 #include <QWidget>
+#include <QString>
 #include <memory>
 
 #include "geometry/rigid3.h"
@@ -28,7 +29,13 @@ class ModelView : public QWidget {
   /// Renders and reads back the current image (for screenshots and tests).
   QImage Grab();
 
+ signals:
+  /// Shift + left click on a mesh: its slot, the point in the room and in
+  /// the mesh's own frame (room_from_model^-1 of the point).
+  void Picked(QString slot, Eigen::Vector3d point_in_room, Eigen::Vector3d point_in_mesh_frame);
+
  private:
+  void PickAt(int x, int y);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -241,15 +241,80 @@ SessionPage::SessionPage(WizardState* state, QWidget* parent) : QWizardPage(pare
     progress_->setValue(static_cast<int>(100 * fraction));
     progress_->setFormat(step + " %p%");
   });
+  picks_label_ = new QLabel(this);
+  picks_label_->setWordWrap(true);
+  align_button_ = new QPushButton(tr("Align from picked pairs"), this);
+  clear_picks_button_ = new QPushButton(tr("Clear picks"), this);
+  connect(align_button_, &QPushButton::clicked, this, &SessionPage::AlignFromPicks);
+  connect(clear_picks_button_, &QPushButton::clicked, this, [this] {
+    model_picks_.clear();
+    reconstruction_picks_.clear();
+    ShowPicks();
+  });
+  connect(model_view_, &ModelView::Picked, this,
+          [this](QString slot, Eigen::Vector3d in_room, Eigen::Vector3d in_mesh) {
+            if (slot == "reconstruction") {
+              reconstruction_picks_.push_back(in_room);
+            } else if (slot == "aligned" || slot == "target") {
+              model_picks_.push_back(in_mesh);
+            }
+            ShowPicks();
+          });
   auto* layout = new QVBoxLayout(this);
   layout->addWidget(sessions_);
   layout->addWidget(model_view_, 1);
   layout->addWidget(details_);
   layout->addWidget(stages_);
+  auto* manual = new QHBoxLayout;
+  manual->addWidget(picks_label_, 1);
+  manual->addWidget(clear_picks_button_);
+  manual->addWidget(align_button_);
+  layout->addLayout(manual);
   auto* row = new QHBoxLayout;
   row->addWidget(run_button_);
   row->addWidget(progress_, 1);
   layout->addLayout(row);
+  ShowPicks();
+}
+
+void SessionPage::ShowPicks() {
+  const size_t pairs = std::min(model_picks_.size(), reconstruction_picks_.size());
+  picks_label_->setText(tr("Manual alignment: Shift+click a point on the model (red or blue), then the same "
+                           "anatomy on the reconstruction (grey); %1 on the model, %2 on the reconstruction, "
+                           "%3 pairs (3 or more needed).")
+                            .arg(model_picks_.size())
+                            .arg(reconstruction_picks_.size())
+                            .arg(pairs));
+  align_button_->setEnabled(pairs >= 3 && model_picks_.size() == reconstruction_picks_.size() &&
+                            shown_reconstruction_ > 0);
+}
+
+void SessionPage::AlignFromPicks() {
+  if (shown_reconstruction_ <= 0) return;
+  align_button_->setEnabled(false);
+  const std::string store_path = state_->options.store_path;
+  const ReconstructionId reconstruction(shown_reconstruction_);
+  const auto model_points = model_picks_;
+  const auto reconstruction_points = reconstruction_picks_;
+  auto connection = std::make_shared<QMetaObject::Connection>();
+  *connection = connect(state_->worker, &Worker::Finished, this, [this, connection](bool ok, QString message) {
+    disconnect(*connection);
+    if (!ok) {
+      QMessageBox::critical(this, tr("Manual alignment refused"), message);
+    } else {
+      model_picks_.clear();
+      reconstruction_picks_.clear();
+    }
+    ShowSession(sessions_->currentRow());
+    ShowPicks();
+  });
+  state_->worker->Start([=](const ControllerCallbacks&) {
+    auto database = SqliteDatabase::Open(store_path);
+    const ManualAlignmentResult r = AlignStoredReconstruction(database.get(), reconstruction, model_points,
+                                                              reconstruction_points, "arpos gui");
+    return StringPrintf("manual alignment %lld: picks %.1f mm RMS, after ICP fitness %.3f, rmse %.2f mm",
+                        static_cast<long long>(r.icp_id.value()), 1000 * r.pick_rmse_m, r.fitness, 1000 * r.rmse_m);
+  });
 }
 
 void SessionPage::initializePage() { ListSessions(); }
@@ -280,6 +345,8 @@ void SessionPage::ListSessions() {
 void SessionPage::ShowSession(int row) {
   model_view_->ClearMeshes();
   details_->clear();
+  const long long previous_reconstruction = shown_reconstruction_;
+  shown_reconstruction_ = 0;
   if (!state_->database || row < 0 || !sessions_->item(row, 0)) return;
   const SessionId session(sessions_->item(row, 0)->text().toLongLong());
   const PlanId plan_id(sessions_->item(row, 1)->text().toLongLong());
@@ -300,6 +367,7 @@ void SessionPage::ShowSession(int row) {
   if (reconstructions.empty()) {
     lines << tr("No reconstruction stored for this session.");
   } else if (const auto recon = state_->database->GetReconstruction(reconstructions.back())) {
+    shown_reconstruction_ = recon->id.value();
     lines << tr("Reconstruction: %1 points from %2 frames%3.")
                  .arg(recon->cloud.points.size())
                  .arg(recon->num_frames_used)
@@ -312,7 +380,6 @@ void SessionPage::ShowSession(int row) {
       const AlignmentRecord& final_alignment = alignments.back();
       const Rigid3d& room_from_model = final_alignment.reconstruction_from_model;
       model_view_->SetMesh("aligned", model, room_from_model, 0.9, 0.25, 0.2, 0.55);
-      model_view_->SetMesh("target", model, plan->room_from_model_target, 0.25, 0.45, 0.95, 0.35);
       // The couch correction that would bring today's pose to the plan's, at
       // the isocentre (the model origin), in room axes.
       const Eigen::Vector3d shift_mm =
@@ -335,6 +402,12 @@ void SessionPage::ShowSession(int row) {
                    .arg(turn_deg.z(), 0, 'f', 2);
     }
   }
+  if (plan) model_view_->SetMesh("target", model, plan->room_from_model_target, 0.25, 0.45, 0.95, 0.35);
+  if (shown_reconstruction_ != previous_reconstruction) {
+    model_picks_.clear();
+    reconstruction_picks_.clear();
+  }
+  ShowPicks();
   details_->setText(lines.join("\n"));
   model_view_->ResetCamera();
 }

@@ -2,6 +2,8 @@
 /// The wizard's pages. Each reads what the store holds when it is shown.
 
 #include <QWizardPage>
+#include <Eigen/Core>
+#include <vector>
 
 #include "ui/wizard.h"
 
@@ -64,6 +66,8 @@ class SessionPage : public QWizardPage {
   void ListSessions();
   void ShowSession(int row);
   void RunSessionStage();
+  void AlignFromPicks();
+  void ShowPicks();
   WizardState* state_;
   QTableWidget* sessions_;
   ModelView* model_view_;
@@ -71,6 +75,13 @@ class SessionPage : public QWizardPage {
   QLabel* stages_;
   QPushButton* run_button_;
   QProgressBar* progress_;
+  // Manual alignment: Shift+click pairs a point on the model (red or blue)
+  // with one on the reconstruction (grey), in order.
+  QLabel* picks_label_;
+  QPushButton* align_button_;
+  QPushButton* clear_picks_button_;
+  long long shown_reconstruction_ = 0;
+  std::vector<Eigen::Vector3d> model_picks_, reconstruction_picks_;
 };
 
 class TrackingPage : public QWizardPage {

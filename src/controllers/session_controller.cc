@@ -6,6 +6,7 @@
 
 #include "geometry/mesh_io.h"
 #include "geometry/so3.h"
+#include "geometry/umeyama.h"
 #include "registration/global_registration.h"
 #include "registration/mesh_cloud.h"
 #include "registration/poisson.h"
@@ -143,6 +144,73 @@ Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
   // Rotation about the centre, then the shift: centre -> centre + shift.
   const Rigid3d turn = Rigid3d::FromRotationVector(rotation, Eigen::Vector3d::Zero());
   return Rigid3d(turn.rotation, centre + shift - turn * centre);
+}
+
+ManualAlignmentResult AlignStoredReconstruction(Database* database, ReconstructionId reconstruction_id,
+                                                const std::vector<Eigen::Vector3d>& model_points,
+                                                const std::vector<Eigen::Vector3d>& reconstruction_points,
+                                                const std::string& actor, double max_pick_rmse_m,
+                                                int threads) {
+  ARPOS_CHECK(database != nullptr, "manual alignment needs a session store");
+  if (model_points.size() != reconstruction_points.size()) {
+    ARPOS_INPUT_ERROR("manual alignment: " << model_points.size() << " points on the model but "
+                                           << reconstruction_points.size() << " on the reconstruction");
+  }
+  if (model_points.size() < 3) {
+    ARPOS_INPUT_ERROR("manual alignment: " << model_points.size() << " point pair(s); pick at least 3");
+  }
+  const auto reconstruction = database->GetReconstruction(reconstruction_id);
+  if (!reconstruction) ARPOS_INPUT_ERROR("reconstruction " << reconstruction_id.value() << " does not exist");
+  const auto session = database->GetSession(reconstruction->session_id);
+  if (!session) ARPOS_INPUT_ERROR("session " << reconstruction->session_id.value() << " does not exist");
+  const auto plan = database->GetPlan(session->plan_id);
+  if (!plan || plan->reference_model.vertices.empty()) {
+    ARPOS_INPUT_ERROR("plan " << session->plan_id.value() << " has no reference model");
+  }
+  const auto fit = EstimateRigidTransform(model_points, reconstruction_points);
+  if (!fit) ARPOS_INPUT_ERROR("manual alignment: the picked points lie on a line; pick spread-out points");
+  if (fit->rmse_m > max_pick_rmse_m) {
+    ARPOS_INPUT_ERROR("manual alignment: the picked pairs disagree by " << 1000 * fit->rmse_m
+                      << " mm RMS after the best rigid fit (at most " << 1000 * max_pick_rmse_m
+                      << " mm): a pair was picked on different anatomy");
+  }
+  ManualAlignmentResult out;
+  out.pick_rmse_m = fit->rmse_m;
+  PointCloud body;
+  for (const auto& p : reconstruction->cloud.points) body.Add(p.cast<double>());
+  const TriangleMesh model = FromStoredMesh(plan->reference_model);
+  const PointCloud model_dense = SampleMeshSurface(model, 0.002);
+  const KdTree model_tree(model_dense);
+  const RegistrationResult refined =
+      RefineOnModel(body, model_dense, model_tree, fit->target_from_source.Inverse(), threads);
+  out.room_from_model = refined.target_from_source.Inverse();
+  out.fitness = refined.fitness;
+  out.rmse_m = refined.rmse_m;
+  database->WithTransaction([&] {
+    AlignmentRecord manual;
+    manual.reconstruction_id = reconstruction_id;
+    manual.method = AlignmentMethod::kManual;
+    manual.reconstruction_from_model = fit->target_from_source;
+    manual.fitness = 0;
+    manual.rmse_m = fit->rmse_m;
+    manual.num_inliers = static_cast<std::int64_t>(model_points.size());
+    manual.options = StringPrintf("picked point pairs: %zu, rmse %.2f mm", model_points.size(), 1000 * fit->rmse_m);
+    out.manual_id = database->AddAlignment(manual);
+    AlignmentRecord icp;
+    icp.reconstruction_id = reconstruction_id;
+    icp.parent_alignment_id = out.manual_id;
+    icp.method = AlignmentMethod::kIcp;
+    icp.reconstruction_from_model = out.room_from_model;
+    icp.fitness = std::clamp(refined.fitness, 0.0, 1.0);
+    icp.rmse_m = refined.rmse_m;
+    icp.num_inliers = refined.num_inliers;
+    icp.options = "point-to-plane, reconstruction onto the model surface, gates 30/10/5 mm; from picked pairs";
+    out.icp_id = database->AddAlignment(icp);
+    database->AppendAudit({AuditId(), 0, actor, "add_alignment", "alignment:" + std::to_string(out.icp_id.value()),
+                           StringPrintf("manual (%zu picked pairs) + ICP: rmse %.2f mm", model_points.size(),
+                                        1000 * refined.rmse_m)});
+  });
+  return out;
 }
 
 SessionController::SessionController(SessionStageOptions options, Database* database,

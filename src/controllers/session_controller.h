@@ -107,6 +107,26 @@ struct SessionStageResult {
   std::string Summary() const;
 };
 
+/// Manual alignment of a stored reconstruction: from point pairs picked on
+/// the reference model (model frame) and on the reconstruction (room frame
+/// at scan time), a rigid fit (Kabsch), refined by point-to-plane ICP of the
+/// reconstruction onto the model surface; both stored (method manual, then
+/// ICP as its child) with an audit entry. Throws InputError for fewer than
+/// three pairs, pairs in a line, a reconstruction or plan that does not
+/// exist, or picks that disagree by more than `max_pick_rmse_m` after the
+/// fit (a pair picked on different anatomy).
+struct ManualAlignmentResult {
+  AlignmentId manual_id, icp_id;
+  Rigid3d room_from_model;     ///< after ICP
+  double pick_rmse_m = 0;      ///< of the picked pairs after the rigid fit
+  double fitness = 0, rmse_m = 0;
+};
+ManualAlignmentResult AlignStoredReconstruction(Database* database, ReconstructionId reconstruction,
+                                                const std::vector<Eigen::Vector3d>& model_points,
+                                                const std::vector<Eigen::Vector3d>& reconstruction_points,
+                                                const std::string& actor, double max_pick_rmse_m = 0.03,
+                                                int threads = 2);
+
 struct ReconstructionFrameReport;
 /// The mean of the reconstruction frames' GICP corrections as a rotation
 /// about `centre` plus a shift of it (the first fused frame counts as none;

@@ -7,6 +7,7 @@
 
 #include "controllers/run_case_controller.h"
 #include "controllers/session_controller.h"
+#include "geometry/mesh_io.h"
 #include "geometry/pose_error.h"
 #include "registration/reconstruction.h"
 #include "sensor/tum_io.h"
@@ -129,6 +130,60 @@ TEST(SessionStage, ManualAlignmentThatIsNotRigidIsRefusedNamingTheFile) {
     EXPECT_NE(std::string(e.what()).find("not a rigid transform"), std::string::npos) << e.what();
   }
   EXPECT_EQ(db->ListSessions(run.plan_id).size(), 1u);  // only run-case's
+}
+
+// Manual alignment from picked point pairs (as the GUI collects them):
+// four points on the model and the same anatomy on the reconstruction,
+// picked roughly (1 cm off), refined by ICP to the automatic result's
+// accuracy; too few or inconsistent pairs are refused, nothing stored.
+TEST(SessionStage, ManualAlignmentFromPickedPairsIsRefinedAndStored) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  const RunCaseResult run = RunCase(case_dir, db.get());
+  ASSERT_TRUE(run.ok()) << run.Summary();
+  const auto reconstructions = db->ListReconstructionIds(run.session_id);
+  ASSERT_EQ(reconstructions.size(), 1u);
+  const size_t stored_before = db->ListAlignments(reconstructions[0]).size();
+  const Rigid3d truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt").front().room_from_x;
+  const TriangleMesh model = LoadTriangleMesh(case_dir / "reference_model.ply");
+  // Spread-out points of the model's front: extremes along x and z.
+  std::vector<Eigen::Vector3d> on_model, on_reconstruction;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e9), hi = -lo;
+  for (const auto& v : model.vertices) {
+    lo = lo.cwiseMin(v.cast<double>());
+    hi = hi.cwiseMax(v.cast<double>());
+  }
+  const Eigen::Vector3d picks_in_model[] = {{0, lo.y(), 0.25}, {0, lo.y(), -0.3}, {0.15, lo.y(), 0}, {-0.15, lo.y(), 0.1}};
+  const Eigen::Vector3d pick_error[] = {{0.01, 0, 0}, {0, 0.008, 0}, {-0.006, 0, 0.005}, {0, -0.01, 0.004}};
+  for (int k = 0; k < 4; ++k) {
+    // The nearest model vertex (a pick lands on the surface).
+    Eigen::Vector3d best = model.vertices.front().cast<double>();
+    for (const auto& v : model.vertices) {
+      if ((v.cast<double>() - picks_in_model[k]).norm() < (best - picks_in_model[k]).norm()) best = v.cast<double>();
+    }
+    on_model.push_back(best);
+    on_reconstruction.push_back(truth * best + pick_error[k]);
+  }
+  const ManualAlignmentResult r =
+      AlignStoredReconstruction(db.get(), reconstructions[0], on_model, on_reconstruction, "test");
+  const PoseError e = ComputePoseError(truth, r.room_from_model);
+  EXPECT_LT(e.translation_mm, 5.0);
+  EXPECT_LT(e.rotation_deg, 0.5);
+  EXPECT_GT(r.fitness, 0.9);
+  EXPECT_EQ(db->ListAlignments(reconstructions[0]).size(), stored_before + 2);
+  const auto icp = db->GetAlignment(r.icp_id);
+  ASSERT_TRUE(icp.has_value());
+  EXPECT_EQ(icp->parent_alignment_id, r.manual_id);
+
+  // Two pairs: refused. A pair on different anatomy (30 cm off): refused.
+  EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], {on_model[0], on_model[1]},
+                                         {on_reconstruction[0], on_reconstruction[1]}, "test"),
+               InputError);
+  auto wrong = on_reconstruction;
+  wrong[2] += Eigen::Vector3d(0.3, 0, 0);
+  EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], on_model, wrong, "test"), InputError);
+  EXPECT_EQ(db->ListAlignments(reconstructions[0]).size(), stored_before + 2);
 }
 
 }  // namespace
