@@ -273,8 +273,8 @@ void SessionController::Run() {
   const size_t recon_step = static_cast<size_t>(step_for(options_.reconstruction_frame_step));
   std::vector<ReconstructionFrameReport> recon_reports;
   const double sticker_size = folder.config.body_markers.size_m;
-  // 1. Every considered frame: room localisation (with its uncertainty),
-  //    stickers, and the depth cloud of reconstruction frames.
+  // 1. Every considered frame: room localisation, stickers, and the depth
+  //    cloud of reconstruction frames.
   struct ScanFrame {
     size_t index = 0;
     double timestamp_s = 0;
@@ -321,9 +321,9 @@ void SessionController::Run() {
   //    from the room-localised frames; every frame with two or more mapped
   //    stickers posed from them and the map rebuilt from those poses (three
   //    rounds); then the one rigid offset between this sticker-consistent
-  //    frame and the room, as the weighted mean (1/sigma^2) of what each
-  //    room-localised frame says, is applied to all. Frames without
-  //    stickers keep their room pose.
+  //    frame and the room, as the robust mean of what each room-localised
+  //    frame says, is applied to all. Room-localised frames with fewer than
+  //    two stickers keep their room pose.
   Step("building the body marker map", 0.55);
   auto t0 = Clock::now();
   BodyMarkerMapOptions map_options;
