@@ -93,14 +93,16 @@ std::string SessionStageResult::Summary() const {
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
       "map, %d more posed from the stickers\n"
       "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
-      "reconstruction: %d points (mean frame correction %.2f mm, %.3f deg taken off), mesh %d vertices\n"
+      "reconstruction: %d points from %d of %d frames (the others disagreed with it; mean frame "
+      "correction %.2f mm, %.3f deg taken off), mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
       "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
       "%.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
       frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
-      marker_map.rejected.size(), reconstruction_points, 1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
+      marker_map.rejected.size(), reconstruction_points, reconstruction_frames_fused,
+      reconstruction_frames_offered, 1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
@@ -436,6 +438,8 @@ void SessionController::Run() {
   // cameras; keep what lies above it and its largest connected part.
   Step("cropping the reconstruction to the body", 0.65);
   t0 = Clock::now();
+  result_.reconstruction_frames_fused = builder.frames_fused();
+  result_.reconstruction_frames_offered = builder.frames_used();
   PointCloud fused = builder.Cloud();
   // GICP makes the frames consistent with the first one fused, so the
   // reconstruction carries that frame's localisation error. Each refined
@@ -583,7 +587,7 @@ void SessionController::Run() {
     recon.recording_id = result_.recording_id;
     recon.cloud = ToStored(body);
     if (!mesh.mesh.empty()) recon.mesh = ToStoredMesh(mesh.mesh);
-    recon.num_frames_used = builder.frames_used();
+    recon.num_frames_used = builder.frames_fused();
     recon.voxel_size_m = recon_options.output_voxel_m;
     result_.reconstruction_id = database_->AddReconstruction(recon);
     database_->AppendAudit({AuditId(), 0, options_.actor, "add_reconstruction",

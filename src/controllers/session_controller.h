@@ -91,6 +91,9 @@ struct SessionStageResult {
   int frames_posed_by_stickers = 0;
   BodyMarkerMapResult marker_map;
   int reconstruction_points = 0;
+  /// Frames offered to the reconstruction and those fused (a frame whose
+  /// GICP correction is refused is left out).
+  int reconstruction_frames_offered = 0, reconstruction_frames_fused = 0;
   /// The fused body surface (room frame at scan time), as stored.
   PointCloud reconstruction;
   int mesh_vertices = 0;

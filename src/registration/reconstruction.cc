@@ -158,6 +158,14 @@ ReconstructionFrameReport ReconstructionBuilder::AddFrame(const PointCloud& clou
     }
   }
   report.correction = report.world_from_camera * world_from_camera.Inverse();
+  const bool refinement_refused = options_.refine_poses && !voxels_.empty() && !report.refined;
+  if (refinement_refused && !options_.fuse_refused_frames) {
+    report.reconstruction_points = static_cast<int>(voxels_.size());
+    report.seconds = NowS() - start_s;
+    return report;
+  }
+  report.fused = true;
+  ++frames_fused_;
 
   // Fusion: running centroids in output voxels.
   const Eigen::Matrix3d r = report.world_from_camera.RotationMatrix();

@@ -53,6 +53,10 @@ struct ReconstructionOptions {
   double max_correction_m = 0.05;      ///< larger GICP corrections are refused
   double max_correction_rad = 0.0873;  ///< 5 degrees
   double min_fitness = 0.5;            ///< share of frame points matched
+  /// A frame whose GICP correction was refused disagrees with the
+  /// reconstruction (a wrong pose, something in front of the body): it is
+  /// not fused unless this is set. The first frame is always fused.
+  bool fuse_refused_frames = false;
   /// Optional crops, world frame (applied before anything else).
   std::optional<OrientedBox> crop_box;
   std::optional<Plane> keep_above_plane;
@@ -65,6 +69,7 @@ struct ReconstructionFrameReport {
   int offered_index = -1;     ///< 0-based count of AddFrame calls
   bool used = false;          ///< false: skipped by frame_stride (nothing else filled)
   bool refined = false;       ///< the GICP correction was applied
+  bool fused = false;         ///< its points went into the reconstruction
   Rigid3d world_from_camera;  ///< the pose the frame was fused with
   Rigid3d correction;         ///< world_from_camera * given^-1 (identity if not refined)
   RegistrationResult registration;  ///< empty for the first frame or refine_poses off
@@ -91,6 +96,8 @@ class ReconstructionBuilder {
   size_t size() const { return voxels_.size(); }
   int frames_offered() const { return frames_offered_; }
   int frames_used() const { return frames_used_; }
+  /// Frames whose points went into the reconstruction.
+  int frames_fused() const { return frames_fused_; }
   /// d_i the next used frame would get.
   double CurrentVoxel() const;
 
@@ -108,6 +115,7 @@ class ReconstructionBuilder {
   Eigen::AlignedBox3d bounds_;
   int frames_offered_ = 0;
   int frames_used_ = 0;
+  int frames_fused_ = 0;
 };
 
 }  // namespace arpos

@@ -92,6 +92,30 @@ TEST(Reconstruction, PerturbedPosesAreRefinedBackToTheTrueSurface) {
   RecordProperty("raw_mean_mm", std::to_string(1e3 * raw.error.mean_m));
 }
 
+// A frame whose pose is far off (its GICP correction is refused) must not
+// smear the reconstruction: it is left out unless asked for.
+TEST(Reconstruction, FrameWithARefusedCorrectionIsNotFused) {
+  const testing::CaseScenario& s = Views();
+  for (const bool fuse_refused : {false, true}) {
+    ReconstructionOptions options;
+    options.frame_stride = 1;
+    options.fuse_refused_frames = fuse_refused;
+    ReconstructionBuilder builder(options);
+    ASSERT_TRUE(builder.AddFrame(s.frames[0].body_in_camera, s.frames[0].room_from_camera).fused);
+    const size_t before = builder.size();
+    // 12 cm off: beyond the 5 cm a correction may move.
+    const Rigid3d wrong = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0.12, 0, 0)) *
+                          s.frames[1].room_from_camera;
+    const ReconstructionFrameReport r = builder.AddFrame(s.frames[1].body_in_camera, wrong);
+    EXPECT_TRUE(r.used);
+    EXPECT_FALSE(r.refined) << r.message;
+    EXPECT_EQ(r.fused, fuse_refused);
+    EXPECT_EQ(builder.size() > before, fuse_refused);
+    EXPECT_EQ(builder.frames_fused(), fuse_refused ? 2 : 1);
+    EXPECT_EQ(builder.frames_used(), 2);
+  }
+}
+
 TEST(Reconstruction, StrideDynamicVoxelAndCrops) {
   const testing::CaseScenario& s = Views();
   ReconstructionOptions options;
