@@ -93,8 +93,8 @@ std::string SessionStageResult::Summary() const {
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
       "map, %d more posed from the stickers\n"
       "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
-      "reconstruction: %d points from %d of %d frames (the others disagreed with it; mean frame "
-      "correction %.2f mm, %.3f deg taken off), mesh %d vertices\n"
+      "reconstruction: %d points from %d of %d frames%s (mean frame correction %.2f mm, %.3f deg "
+      "taken off), mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
       "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
@@ -102,7 +102,9 @@ std::string SessionStageResult::Summary() const {
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
       frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
       marker_map.rejected.size(), reconstruction_points, reconstruction_frames_fused,
-      reconstruction_frames_offered, 1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
+      reconstruction_frames_offered,
+      reconstruction_frames_fused < reconstruction_frames_offered ? ", the others disagreed with it" : "",
+      1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
