@@ -37,10 +37,14 @@ cv::Vec3f BilinearAt(const cv::Mat& img, double x, double y) {
 }  // namespace
 
 std::string SensorProfile::Describe() const {
-  return StringPrintf(
+  std::string out = StringPrintf(
       "%s %dx%d f=%.1f depth_scale=%g sigma_z=%.4g+%.4g*z^2 m range=[%.2f, %.2f] m",
       name.c_str(), intrinsics.width, intrinsics.height, intrinsics.fx, intrinsics.depth_scale,
       depth_sigma_const_m, depth_sigma_quad_per_m, min_range_m, max_range_m);
+  if (disparity_subpixel > 0 && projector_baseline_m > 0) {
+    out += StringPrintf(" disparity_step=1/%d px (baseline %.3f m)", disparity_subpixel, projector_baseline_m);
+  }
+  return out;
 }
 
 SensorProfile MakeSensorProfile(const std::string& name) {

@@ -87,6 +87,7 @@ struct SimulationTruth {
   std::string sensor;
   bool noise = true;
   bool hard = false;
+  std::string room_walk = "full";  ///< planning walk (optional in the file: full)
   int room_frames = 0, body_scan_frames = 0, tracking_frames = 0, tracking_sequences = 0;
   Eigen::Vector3d isocentre_in_room_m = Eigen::Vector3d::Zero();
   Rigid3d room_from_model_target;

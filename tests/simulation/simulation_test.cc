@@ -507,6 +507,10 @@ void ExpectValidCase(const fs::path& root, const SimulationOptions& options) {
   EXPECT_EQ(truth.seed, options.seed);
   EXPECT_EQ(truth.profile, options.profile);
   EXPECT_EQ(truth.hard, options.hard);
+  EXPECT_EQ(truth.room_walk, options.room_walk);
+  if (options.profile == "xtion") {
+    EXPECT_NE(truth.sensor.find("disparity_step=1/8 px"), std::string::npos) << truth.sensor;
+  }
   EXPECT_TRUE(truth.room_from_model_target.IsApprox(folder.room_from_model_target, 1e-9, 1e-9));
   EXPECT_GE(truth.room_markers.size(), 10u);
   EXPECT_EQ(truth.room_markers.front().id, 0);
