@@ -74,6 +74,33 @@ RegistrationResult RefineOnModel(const PointCloud& scene, const PointCloud& mode
   return result;
 }
 
+// Small rigid offsets, each as (rotation vector, shift of `centre`): their
+// mean, leaving out those whose shift exceeds 3 x the median shift +
+// `margin_m` (an offset pulled wrongly). Small angles: plain means. The mean
+// as a rotation about `centre` followed by the shift; nullopt with fewer than
+// `min_count` offsets kept.
+using Offset = Eigen::Matrix<double, 6, 1>;
+std::optional<Rigid3d> RobustMeanOffset(const std::vector<Offset>& offsets, const Eigen::Vector3d& centre,
+                                        double margin_m, size_t min_count) {
+  if (offsets.size() < std::max<size_t>(min_count, 1)) return std::nullopt;
+  std::vector<double> sizes;
+  for (const auto& v : offsets) sizes.push_back(v.tail<3>().norm());
+  std::vector<double> sorted = sizes;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double limit = 3 * sorted[sorted.size() / 2] + margin_m;
+  Offset mean = Offset::Zero();
+  size_t used = 0;
+  for (size_t k = 0; k < offsets.size(); ++k) {
+    if (sizes[k] > limit) continue;
+    mean += offsets[k];
+    ++used;
+  }
+  if (used == 0 || used < min_count) return std::nullopt;
+  mean /= static_cast<double>(used);
+  const Rigid3d turn = Rigid3d::FromRotationVector(mean.head<3>(), Eigen::Vector3d::Zero());
+  return Rigid3d(turn.rotation, centre + mean.tail<3>() - turn * centre);
+}
+
 }  // namespace
 
 std::string SessionStageOptions::Check() const {
@@ -117,37 +144,18 @@ Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
                          const Eigen::Vector3d& centre) {
   // Per refined frame: its correction's rotation vector and the shift it
   // gives the reconstruction's centre; the first fused frame counts as no
-  // correction; frames whose shift is far beyond the median are left out (a
-  // frame GICP pulled wrongly). Small angles: plain means.
-  std::vector<Eigen::Vector3d> rotations, shifts;
+  // correction; outlying frames (GICP pulled wrongly) left out.
+  std::vector<Offset> offsets;
   bool first = true;
   for (const auto& r : reports) {
     if (!r.used) continue;
     if (!first && !r.refined) continue;  // fused without a consistent correction
-    rotations.push_back(first ? Eigen::Vector3d::Zero() : r.correction.RotationVector());
-    shifts.push_back(first ? Eigen::Vector3d::Zero() : Eigen::Vector3d(r.correction * centre - centre));
+    Offset v = Offset::Zero();
+    if (!first) v << r.correction.RotationVector(), r.correction * centre - centre;
+    offsets.push_back(v);
     first = false;
   }
-  if (shifts.size() < 3) return Rigid3d::Identity();
-  std::vector<double> sizes;
-  for (const auto& v : shifts) sizes.push_back(v.norm());
-  std::vector<double> sorted = sizes;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double limit = 3 * sorted[sorted.size() / 2] + 1e-4;
-  Eigen::Vector3d rotation = Eigen::Vector3d::Zero(), shift = Eigen::Vector3d::Zero();
-  int n = 0;
-  for (size_t i = 0; i < shifts.size(); ++i) {
-    if (sizes[i] > limit) continue;
-    rotation += rotations[i];
-    shift += shifts[i];
-    ++n;
-  }
-  if (n < 3) return Rigid3d::Identity();
-  rotation /= n;
-  shift /= n;
-  // Rotation about the centre, then the shift: centre -> centre + shift.
-  const Rigid3d turn = Rigid3d::FromRotationVector(rotation, Eigen::Vector3d::Zero());
-  return Rigid3d(turn.rotation, centre + shift - turn * centre);
+  return RobustMeanOffset(offsets, centre, 1e-4, 3).value_or(Rigid3d::Identity());
 }
 
 ManualAlignmentResult AlignStoredReconstruction(Database* database, ReconstructionId reconstruction_id,
@@ -364,41 +372,21 @@ void SessionController::Run() {
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (const auto& m : map.markers) centre += m.room_from_marker.translation;
     if (!map.markers.empty()) centre /= static_cast<double>(map.markers.size());
-    std::vector<Eigen::Matrix<double, 6, 1>> offsets;
+    std::vector<Offset> offsets;
     for (const ScanFrame& f : frames) {
       if (!f.localized || !f.posed) continue;
       const Rigid3d d = f.room_from_camera * f.view.room_from_camera.Inverse();
-      Eigen::Matrix<double, 6, 1> v;
+      Offset v;
       v << d.RotationVector(), d * centre - centre;
       offsets.push_back(v);
     }
-    Rigid3d room_from_sticker_frame;  // identity unless anchored below
-    if (!offsets.empty()) {
-      // Robust: frames whose offset is far beyond the median are left out.
-      std::vector<double> sizes;
-      for (const auto& v : offsets) sizes.push_back(v.tail<3>().norm());
-      std::vector<double> sorted = sizes;
-      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-      const double limit = 3 * sorted[sorted.size() / 2] + 0.002;
-      // Equal weights: the localiser's sigmas leave out map errors (two
-      // frames 0.05 deg apart by their sigmas differed by 0.4 deg), and
-      // weighting by them (capped at the median or not) measured no better
-      // than equal weights over 20 seeds.
-      Eigen::Matrix<double, 6, 1> mean = Eigen::Matrix<double, 6, 1>::Zero();
-      int used = 0;
-      for (size_t k = 0; k < offsets.size(); ++k) {
-        if (sizes[k] > limit) continue;
-        mean += offsets[k];
-        ++used;
-      }
-      if (used > 0) {
-        mean /= used;
-        const Rigid3d rotation = Rigid3d::FromRotationVector(mean.head<3>(), Eigen::Vector3d::Zero());
-        // Rotate about the centre, then shift it.
-        room_from_sticker_frame =
-            Rigid3d(rotation.rotation, centre + mean.tail<3>() - rotation * centre);
-      }
-    }
+    // Equal weights: the localiser's sigmas leave out map errors (two frames
+    // 0.05 deg apart by their sigmas differed by 0.4 deg), and weighting by
+    // them (capped at the median or not) measured no better than equal
+    // weights over 20 seeds. Identity when no frame is both room-localised
+    // and sticker-posed.
+    const Rigid3d room_from_sticker_frame =
+        RobustMeanOffset(offsets, centre, 0.002, 1).value_or(Rigid3d::Identity());
     for (ScanFrame& f : frames) {
       if (f.posed) {
         f.view.room_from_camera = room_from_sticker_frame * f.view.room_from_camera;
