@@ -10,6 +10,7 @@
 
 #include <cmath>
 
+#include "registration/pcl_convert.h"
 #include "util/check.h"
 
 namespace arpos {
@@ -60,17 +61,7 @@ std::vector<FpfhDescriptor> ComputeFpfh(const PointCloud& cloud, const FpfhOptio
   std::vector<FpfhDescriptor> out(cloud.size());
   if (valid) valid->assign(cloud.size(), false);
   if (cloud.empty()) return out;
-  pcl::PointCloud<pcl::PointNormal>::Ptr input(new pcl::PointCloud<pcl::PointNormal>);
-  input->resize(cloud.size());
-  for (size_t i = 0; i < cloud.size(); ++i) {
-    pcl::PointNormal& p = (*input)[i];
-    p.x = static_cast<float>(cloud.points[i].x());
-    p.y = static_cast<float>(cloud.points[i].y());
-    p.z = static_cast<float>(cloud.points[i].z());
-    p.normal_x = static_cast<float>(cloud.normals[i].x());
-    p.normal_y = static_cast<float>(cloud.normals[i].y());
-    p.normal_z = static_cast<float>(cloud.normals[i].z());
-  }
+  const pcl::PointCloud<pcl::PointNormal>::Ptr input = ToPclPointNormals(cloud);
   pcl::FPFHEstimationOMP<pcl::PointNormal, pcl::PointNormal, pcl::FPFHSignature33> fpfh;
   fpfh.setNumberOfThreads(options.num_threads > 0 ? options.num_threads
                                                   : omp_get_max_threads());

@@ -5,6 +5,7 @@
 #include <pcl/point_types.h>
 #include <pcl/registration/gicp.h>
 
+#include "registration/pcl_convert.h"
 #include "util/check.h"
 
 namespace arpos {
@@ -14,17 +15,6 @@ class Gicp : public pcl::GeneralizedIterativeClosestPoint<pcl::PointXYZ, pcl::Po
  public:
   int iterations() const { return nr_iterations_; }
 };
-
-pcl::PointCloud<pcl::PointXYZ>::Ptr ToPcl(const PointCloud& cloud) {
-  pcl::PointCloud<pcl::PointXYZ>::Ptr out(new pcl::PointCloud<pcl::PointXYZ>);
-  out->resize(cloud.size());
-  for (size_t i = 0; i < cloud.size(); ++i) {
-    const Eigen::Vector4d& p = cloud.points[i];
-    (*out)[i] = pcl::PointXYZ(static_cast<float>(p.x()), static_cast<float>(p.y()),
-                              static_cast<float>(p.z()));
-  }
-  return out;
-}
 
 }  // namespace
 
@@ -53,8 +43,8 @@ RegistrationResult AlignGicpPcl(const PointCloud& source, const PointCloud& targ
     return result;
   }
   Gicp gicp;
-  gicp.setInputSource(ToPcl(source));
-  gicp.setInputTarget(ToPcl(target));
+  gicp.setInputSource(ToPclPoints(source));
+  gicp.setInputTarget(ToPclPoints(target));
   gicp.setMaxCorrespondenceDistance(options.max_correspondence_distance_m);
   gicp.setMaximumIterations(options.max_iterations);
   gicp.setTransformationEpsilon(options.transformation_epsilon);

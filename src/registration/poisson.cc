@@ -13,6 +13,7 @@
 #include <cstdio>
 
 #include "registration/kdtree.h"
+#include "registration/pcl_convert.h"
 #include "util/check.h"
 
 namespace arpos {
@@ -67,17 +68,7 @@ PoissonResult PoissonMesh(const PointCloud& cloud, const PoissonOptions& options
   PoissonResult result;
   if (cloud.size() < 3) return result;
 
-  pcl::PointCloud<pcl::PointNormal>::Ptr input(new pcl::PointCloud<pcl::PointNormal>);
-  input->resize(cloud.size());
-  for (size_t i = 0; i < cloud.size(); ++i) {
-    pcl::PointNormal& p = (*input)[i];
-    p.x = static_cast<float>(cloud.points[i].x());
-    p.y = static_cast<float>(cloud.points[i].y());
-    p.z = static_cast<float>(cloud.points[i].z());
-    p.normal_x = static_cast<float>(cloud.normals[i].x());
-    p.normal_y = static_cast<float>(cloud.normals[i].y());
-    p.normal_z = static_cast<float>(cloud.normals[i].z());
-  }
+  const pcl::PointCloud<pcl::PointNormal>::Ptr input = ToPclPointNormals(cloud);
   pcl::Poisson<pcl::PointNormal> poisson;
   poisson.setDepth(options.depth);
   poisson.setPointWeight(options.point_weight);
