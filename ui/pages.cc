@@ -193,23 +193,24 @@ void PlanningPage::ImportCase() {
   // not shared between threads.
   const std::string store_path = state_->options.store_path;
   const std::string case_dir = state_->options.case_dir;
-  auto connection = std::make_shared<QMetaObject::Connection>();
-  *connection = connect(state_->worker, &Worker::Finished, this, [this, connection](bool ok, QString message) {
-    disconnect(*connection);
-    import_button_->setEnabled(true);
-    if (!ok) QMessageBox::critical(this, tr("Import failed"), message);
-    ShowLatestPlan();
-  });
-  state_->worker->Start([store_path, case_dir](const ControllerCallbacks& callbacks) {
-    auto database = SqliteDatabase::Open(store_path);
-    RunCaseOptions options;
-    options.case_dir = case_dir;
-    options.actor = "arpos gui";
-    options.read_all_images = false;
-    RunCaseController controller(options, database.get(), callbacks);
-    controller.Run();
-    return controller.result().Summary();
-  });
+  const bool started = state_->worker->Start(
+      [store_path, case_dir](const ControllerCallbacks& callbacks) {
+        auto database = SqliteDatabase::Open(store_path);
+        RunCaseOptions options;
+        options.case_dir = case_dir;
+        options.actor = "arpos gui";
+        options.read_all_images = false;
+        RunCaseController controller(options, database.get(), callbacks);
+        controller.Run();
+        return controller.result().Summary();
+      },
+      this,
+      [this](bool ok, QString message) {
+        import_button_->setEnabled(true);
+        if (!ok) QMessageBox::critical(this, tr("Import failed"), message);
+        ShowLatestPlan();
+      });
+  if (!started) import_button_->setEnabled(true);
 }
 
 // ---------------------------------------------------------------- session
@@ -296,25 +297,27 @@ void SessionPage::AlignFromPicks() {
   const ReconstructionId reconstruction(shown_reconstruction_);
   const auto model_points = model_picks_;
   const auto reconstruction_points = reconstruction_picks_;
-  auto connection = std::make_shared<QMetaObject::Connection>();
-  *connection = connect(state_->worker, &Worker::Finished, this, [this, connection](bool ok, QString message) {
-    disconnect(*connection);
-    if (!ok) {
-      QMessageBox::critical(this, tr("Manual alignment refused"), message);
-    } else {
-      model_picks_.clear();
-      reconstruction_picks_.clear();
-    }
-    ShowSession(sessions_->currentRow());
-    ShowPicks();
-  });
-  state_->worker->Start([=](const ControllerCallbacks&) {
-    auto database = SqliteDatabase::Open(store_path);
-    const ManualAlignmentResult r = AlignStoredReconstruction(database.get(), reconstruction, model_points,
-                                                              reconstruction_points, "arpos gui");
-    return StringPrintf("manual alignment %lld: picks %.1f mm RMS, after ICP fitness %.3f, rmse %.2f mm",
-                        static_cast<long long>(r.icp_id.value()), 1000 * r.pick_rmse_m, r.fitness, 1000 * r.rmse_m);
-  });
+  const bool started = state_->worker->Start(
+      [=](const ControllerCallbacks&) {
+        auto database = SqliteDatabase::Open(store_path);
+        const ManualAlignmentResult r = AlignStoredReconstruction(database.get(), reconstruction, model_points,
+                                                                  reconstruction_points, "arpos gui");
+        return StringPrintf("manual alignment %lld: picks %.1f mm RMS, after ICP fitness %.3f, rmse %.2f mm",
+                            static_cast<long long>(r.icp_id.value()), 1000 * r.pick_rmse_m, r.fitness,
+                            1000 * r.rmse_m);
+      },
+      this,
+      [this](bool ok, QString message) {
+        if (!ok) {
+          QMessageBox::critical(this, tr("Manual alignment refused"), message);
+        } else {
+          model_picks_.clear();
+          reconstruction_picks_.clear();
+        }
+        ShowSession(sessions_->currentRow());
+        ShowPicks();
+      });
+  if (!started) ShowPicks();
 }
 
 void SessionPage::initializePage() { ListSessions(); }
@@ -420,22 +423,23 @@ void SessionPage::RunSessionStage() {
   run_button_->setEnabled(false);
   const std::string store_path = state_->options.store_path;
   const std::string case_dir = state_->options.case_dir;
-  auto connection = std::make_shared<QMetaObject::Connection>();
-  *connection = connect(state_->worker, &Worker::Finished, this, [this, connection](bool ok, QString message) {
-    disconnect(*connection);
-    run_button_->setEnabled(true);
-    if (!ok) QMessageBox::critical(this, tr("Session stage failed"), message);
-    ListSessions();
-  });
-  state_->worker->Start([store_path, case_dir](const ControllerCallbacks& callbacks) {
-    auto database = SqliteDatabase::Open(store_path);
-    SessionStageOptions options;
-    options.case_dir = case_dir;
-    options.actor = "arpos gui";
-    SessionController controller(options, database.get(), callbacks);
-    controller.Run();
-    return controller.result().Summary();
-  });
+  const bool started = state_->worker->Start(
+      [store_path, case_dir](const ControllerCallbacks& callbacks) {
+        auto database = SqliteDatabase::Open(store_path);
+        SessionStageOptions options;
+        options.case_dir = case_dir;
+        options.actor = "arpos gui";
+        SessionController controller(options, database.get(), callbacks);
+        controller.Run();
+        return controller.result().Summary();
+      },
+      this,
+      [this](bool ok, QString message) {
+        run_button_->setEnabled(true);
+        if (!ok) QMessageBox::critical(this, tr("Session stage failed"), message);
+        ListSessions();
+      });
+  if (!started) run_button_->setEnabled(true);
 }
 
 // ---------------------------------------------------------------- tracking

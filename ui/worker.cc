@@ -1,5 +1,7 @@
 #include "ui/worker.h"
 
+#include <memory>
+
 namespace arpos::ui {
 
 Worker::Worker(QObject* parent) : QObject(parent) {}
@@ -39,6 +41,18 @@ bool Worker::Start(Job job) {
   });
   thread_->start();
   return true;
+}
+
+bool Worker::Start(Job job, QObject* receiver, std::function<void(bool ok, QString message)> done) {
+  if (busy_) return false;
+  auto connection = std::make_shared<QMetaObject::Connection>();
+  *connection = connect(this, &Worker::Finished, receiver, [connection, done = std::move(done)](bool ok, QString message) {
+    QObject::disconnect(*connection);
+    done(ok, message);
+  });
+  if (Start(std::move(job))) return true;
+  QObject::disconnect(*connection);
+  return false;
 }
 
 }  // namespace arpos::ui

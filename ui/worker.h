@@ -4,6 +4,7 @@
 /// cancel flag that every controller takes.
 
 #include <QObject>
+#include <QString>
 #include <QThread>
 #include <atomic>
 #include <functional>
@@ -21,6 +22,9 @@ class Worker : public QObject {
   ~Worker() override;
   /// Starts `job` unless one is running; returns false if busy.
   bool Start(Job job);
+  /// The same, and calls `done` once, on `receiver`'s thread, when this job
+  /// finishes (ok: the job returned; message: its result or the error).
+  bool Start(Job job, QObject* receiver, std::function<void(bool ok, QString message)> done);
   void Cancel() { cancel_ = true; }
   bool busy() const { return busy_; }
 
