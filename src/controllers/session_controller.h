@@ -65,6 +65,9 @@ struct SessionStageOptions {
   /// Take the mean of the reconstruction frames' GICP corrections off the
   /// fused cloud (it otherwise carries the first frame's pose error).
   bool average_anchor = true;
+  /// Fewer mapped body stickers than this: the stage stops with an error
+  /// (tracking follows the patient by them; one or two give a weak pose).
+  int min_stickers = 3;
   int poisson_depth = 8;
   int threads = 2;
   std::string actor = "arpos session";

@@ -4,9 +4,15 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <set>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "controllers/run_case_controller.h"
 #include "controllers/session_controller.h"
+#include "features/marker_detector.h"
 #include "geometry/mesh_io.h"
 #include "geometry/pose_error.h"
 #include "registration/reconstruction.h"
@@ -65,6 +71,57 @@ TEST(AnchorCorrection, MeanOfTheRefinedFramesWithOutliersAndUnrefinedLeftOut) {
   EXPECT_NEAR(c.RotationVector().norm(), 0, 1e-15);
 }
 
+// Takes body stickers off the patient after the fact: in every body_scan
+// colour frame, each detected sticker whose id `hide` picks is painted over
+// (its square enlarged by 80 % about the centre, filled with the median
+// colour of a ring around it). Returns the ids painted over.
+std::set<int> PaintOutStickers(const fs::path& case_dir, const std::function<bool(int)>& hide) {
+  MarkerDetectorOptions options;
+  options.id_ranges = {{100, 199}};
+  std::set<int> painted;
+  for (const auto& entry : fs::directory_iterator(case_dir / "body_scan" / "rgb")) {
+    cv::Mat image = cv::imread(entry.path().string(), cv::IMREAD_COLOR);
+    EXPECT_FALSE(image.empty()) << entry.path();
+    bool changed = false;
+    for (const MarkerObservation& o : DetectMarkers(image, options)) {
+      if (!hide(o.id)) continue;
+      Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+      for (const auto& c : o.corners_px) centre += c / 4;
+      std::vector<cv::Point> inner, outer;
+      for (const auto& c : o.corners_px) {
+        const Eigen::Vector2d a = centre + 1.8 * (c - centre), b = centre + 2.6 * (c - centre);
+        inner.emplace_back(cvRound(a.x()), cvRound(a.y()));
+        outer.emplace_back(cvRound(b.x()), cvRound(b.y()));
+      }
+      cv::Mat ring(image.size(), CV_8UC1, cv::Scalar(0));
+      cv::fillConvexPoly(ring, outer, cv::Scalar(255));
+      cv::fillConvexPoly(ring, inner, cv::Scalar(0));
+      std::vector<cv::Vec3b> around;
+      for (int y = 0; y < image.rows; ++y) {
+        for (int x = 0; x < image.cols; ++x) {
+          if (ring.at<std::uint8_t>(y, x)) around.push_back(image.at<cv::Vec3b>(y, x));
+        }
+      }
+      cv::Vec3b fill(128, 128, 128);
+      if (!around.empty()) {
+        for (int ch = 0; ch < 3; ++ch) {
+          std::vector<std::uint8_t> v;
+          for (const auto& p : around) v.push_back(p[ch]);
+          std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+          fill[ch] = v[v.size() / 2];
+        }
+      }
+      cv::fillConvexPoly(image, inner, cv::Scalar(fill[0], fill[1], fill[2]));
+      painted.insert(o.id);
+      changed = true;
+    }
+    if (changed) {
+      EXPECT_TRUE(cv::imwrite(entry.path().string(), image)) << entry.path();
+    }
+  }
+  return painted;
+}
+
 // run-case on `case_dir` into `db`; session outputs into `out_dir` if given.
 RunCaseResult RunCase(const fs::path& case_dir, Database* db, std::optional<fs::path> out_dir = std::nullopt) {
   RunCaseOptions options;
@@ -106,6 +163,46 @@ TEST(SessionStage, ScanWithoutABodyIsAClearErrorAndStoresNoSession) {
   EXPECT_NE(r.failures.front().find("body_scan"), std::string::npos) << r.failures.front();
   EXPECT_NE(r.failures.front().find("no usable body surface"), std::string::npos) << r.failures.front();
   // What planning stored stays; no half session.
+  EXPECT_EQ(db->ListSessions(r.plan_id).size(), 0u);
+  EXPECT_TRUE(r.room_map_id.valid());
+}
+
+// Stickers the scan does not show (fallen off, covered): the map holds only
+// the ones seen, and the model pose is as good as with all of them.
+TEST(SessionStage, ScanWithHalfTheStickersHiddenMapsTheRest) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  const std::set<int> hidden = PaintOutStickers(case_dir, [](int id) { return id % 2 == 0; });
+  ASSERT_GE(hidden.size(), 2u);
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  const RunCaseResult r = RunCase(case_dir, db.get(), dir.path() / "out");
+  ASSERT_TRUE(r.ok()) << r.Summary();
+  const auto maps = db->ListBodyMarkerMapIds(r.session_id);
+  ASSERT_EQ(maps.size(), 1u);
+  const auto map = db->GetBodyMarkerMap(maps[0]);
+  ASSERT_TRUE(map.has_value());
+  EXPECT_GE(map->markers.size(), 3u);
+  for (const auto& m : map->markers) EXPECT_EQ(hidden.count(m.marker_id), 0u) << "sticker " << m.marker_id << " was painted over";
+  const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
+  const auto estimate = ReadTrajectory(dir.path() / "out" / "model_pose.txt");
+  ASSERT_FALSE(estimate.empty());
+  const PoseError e = ComputePoseError(truth.front().room_from_x, estimate.front().room_from_x);
+  EXPECT_LT(e.translation_mm, 5.0);
+  EXPECT_LT(e.rotation_deg, 0.5);
+}
+
+// No sticker on the patient at all: tracking would have nothing to follow,
+// so the stage stops with a clear error naming the scan and stores no session.
+TEST(SessionStage, ScanWithoutStickersIsAClearErrorAndStoresNoSession) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  ASSERT_FALSE(PaintOutStickers(case_dir, [](int) { return true; }).empty());
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  const RunCaseResult r = RunCase(case_dir, db.get());
+  ASSERT_FALSE(r.ok());
+  ASSERT_EQ(r.failures.size(), 1u) << r.Summary();
+  EXPECT_NE(r.failures.front().find("body_scan"), std::string::npos) << r.failures.front();
+  EXPECT_NE(r.failures.front().find("sticker"), std::string::npos) << r.failures.front();
   EXPECT_EQ(db->ListSessions(r.plan_id).size(), 0u);
   EXPECT_TRUE(r.room_map_id.valid());
 }
