@@ -68,6 +68,8 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (!(match_ratio > 0 && match_ratio <= 1) || !(relocalisation_ratio > 0 && relocalisation_ratio <= 1))
     out << "match ratios must be in (0, 1]";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
+  else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
+
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
   else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
   else if (min_marker_corners < 4 || min_keypoints < 6 || min_keypoints_tracking < 6)
@@ -472,6 +474,16 @@ struct CameraLocalizer::Impl {
     // Markers that disagree badly with an otherwise keypoint-based pose would
     // mean a wrong pose or a moved marker: require consistency when both exist.
     if (by_keypoints && r.marker_inliers > 0 && r.marker_rms_px > 2 * options.max_marker_rms_px) return false;
+    // Keypoints alone, without a motion prior: only a well-conditioned pose.
+    if (!tracking && !by_markers && by_keypoints &&
+        !(out->position_sigma_mm <= 1000 * options.max_relocalisation_position_sigma_m)) {
+      std::ostringstream why;
+      why << "keypoints alone, without a motion prior, give a poorly conditioned pose (sigma "
+          << out->position_sigma_mm << " mm, limit " << 1000 * options.max_relocalisation_position_sigma_m
+          << " mm); refused";
+      out->message = why.str();
+      return false;
+    }
     return by_markers || by_keypoints;
   }
 };
@@ -632,6 +644,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   }
   if (ok) {
     out.ok = true;
+    out.message.clear();
     out.room_from_camera = refined.camera_from_room.Inverse();
     m.prev_camera_from_room = m.last_camera_from_room;
     m.prev_t = m.last_t;

@@ -108,6 +108,36 @@ TEST(Localizer, KeypointRelocalisationBeyondReachOfARecentPoseIsRefused) {
   EXPECT_TRUE(later_localizer.Localize(later).ok);
 }
 
+// Keypoints alone on far texture leave a sideways-shift / turn ambiguity;
+// without a motion prior such a pose is refused when its own uncertainty is
+// above the relocalisation limit (here set to half a found pose's sigma).
+TEST(Localizer, PoorlyConditionedKeypointRelocalisationIsRefused) {
+  const auto& c = GetSmallCase();
+  const CameraIntrinsics& K = c.folder.config.camera;
+  CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+  options.use_markers = false;  // keypoints only
+  const Sequence seq = Sequence::Open(c.folder.room_dir);
+  std::optional<size_t> frame_index;
+  double sigma_mm = 0;
+  for (size_t i = 1; i < seq.size() && !frame_index; ++i) {
+    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
+    const LocalizationResult r = alone.Localize(seq.LoadFrame(i, K));
+    if (r.ok && r.status == LocalizationStatus::kRelocalized) {
+      frame_index = i;
+      sigma_mm = r.position_sigma_mm;
+    }
+  }
+  ASSERT_TRUE(frame_index.has_value()) << "no frame localisable by keypoints alone";
+  ASSERT_GT(sigma_mm, 0.1);
+
+  CameraLocalizerOptions strict = options;
+  strict.max_relocalisation_position_sigma_m = 0.5 * sigma_mm / 1000;
+  CameraLocalizer cold(GetSmallCaseMap().map, K, strict);
+  const LocalizationResult refused = cold.Localize(seq.LoadFrame(*frame_index, K));
+  EXPECT_FALSE(refused.ok);
+  EXPECT_NE(refused.message.find("poorly conditioned"), std::string::npos) << refused.message;
+}
+
 TEST(Localizer, FrameWithoutMarkersOrTextureIsLostAndTrackingRecovers) {
   const auto& c = GetSmallCase();
   const CameraIntrinsics& K = c.folder.config.camera;
