@@ -120,7 +120,7 @@ std::string SessionStageResult::Summary() const {
   out << StringPrintf(
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
       "map, %d more posed from the stickers\n"
-      "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out\n"
+      "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out; %s\n"
       "reconstruction: %d points from %d of %d frames%s (mean frame correction %.2f mm, %.3f deg "
       "taken off), mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
@@ -129,7 +129,11 @@ std::string SessionStageResult::Summary() const {
       "%.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
       frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
-      marker_map.rejected.size(), reconstruction_points, reconstruction_frames_fused,
+      marker_map.rejected.size(),
+      stickers_on_surface
+          ? StringPrintf("placed from %d frames registered to the reconstruction", frames_registered_for_stickers).c_str()
+          : "from the sticker-consistent cameras",
+      reconstruction_points, reconstruction_frames_fused,
       reconstruction_frames_offered,
       reconstruction_frames_fused < reconstruction_frames_offered ? ", the others disagreed with it" : "",
       1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
@@ -294,8 +298,11 @@ void SessionController::Run() {
     bool localized = false;
     Rigid3d room_from_camera;  ///< room map's, then the final pose
     bool posed = false;        ///< a final pose exists
+    bool by_stickers = false;  ///< posed from mapped stickers (last round)
     BodyScanView view;         ///< stickers (room_from_camera: final pose)
     std::optional<PointCloud> cloud;
+    std::optional<PointCloud> sticker_cloud;  ///< frames with stickers, for step 4
+    std::optional<Rigid3d> surface_pose;      ///< registered to the reconstruction (step 4)
   };
   std::vector<ScanFrame> frames;
   double t_localize = 0, t_markers = 0, t_recon = 0;
@@ -320,6 +327,10 @@ void SessionController::Run() {
                               camera, sticker_size);
     t_markers += SecondsSince(t0);
     if (for_recon) f.cloud = DepthToCloud(frame, camera, depth_options);
+    if (options_.stickers_on_surface && for_markers && !f.view.markers.empty()) {
+      // Kept thinned: registered to the reconstruction at >= 1 cm voxels.
+      f.sticker_cloud = VoxelDownsample(f.cloud ? *f.cloud : DepthToCloud(frame, camera, depth_options), 0.004);
+    }
     frames.push_back(std::move(f));
   }
   if (result_.frames_localized == 0) {
@@ -356,12 +367,12 @@ void SessionController::Run() {
   for (int round = 0; round < 3 && map.ok(); ++round) {
     sticker_posed = 0;
     for (ScanFrame& f : frames) {
-      f.posed = false;
+      f.posed = f.by_stickers = false;
       if (f.view.markers.size() < 2) continue;
       const StickerLocalization p = LocalizeFromStickers(f.view, map, sticker_size, camera);
       if (!p.ok) continue;
       f.view.room_from_camera = p.room_from_camera;
-      f.posed = true;
+      f.posed = f.by_stickers = true;
       ++sticker_posed;
     }
     if (sticker_posed == 0) break;
@@ -430,12 +441,16 @@ void SessionController::Run() {
   Step("fusing the depth", 0.6);
   t0 = Clock::now();
   std::vector<StampedPose> camera_poses;
+  std::vector<const ScanFrame*> recon_frame;  // parallel to recon_reports
   Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
   for (const ScanFrame& f : frames) {
     if (!f.posed) continue;
     camera_poses.push_back({f.timestamp_s, f.room_from_camera});
     camera_centre_sum += f.room_from_camera.translation;
-    if (f.cloud) recon_reports.push_back(builder.AddFrame(*f.cloud, f.room_from_camera));
+    if (f.cloud) {
+      recon_reports.push_back(builder.AddFrame(*f.cloud, f.room_from_camera));
+      recon_frame.push_back(&f);
+    }
   }
   t_recon += SecondsSince(t0);
 
@@ -451,6 +466,7 @@ void SessionController::Run() {
   // frame's correction is (first frame's error) * (its own error)^-1; their
   // mean estimates the first frame's error (the others average out): its
   // shift at the reconstruction's centre is taken off the whole cloud.
+  Rigid3d anchor = Rigid3d::Identity();
   if (options_.average_anchor) {
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t i = 0; i < fused.size(); ++i) centre += fused.points[i].head<3>();
@@ -459,6 +475,46 @@ void SessionController::Run() {
     fused.Transform(correction.Inverse());
     result_.anchor_shift_m = correction * centre - centre;
     result_.anchor_rotation_deg = DegFromRad(correction.RotationVector().norm());
+    anchor = correction;
+  }
+  // 4. The stickers on today's surface. Cameras posed from 3 cm stickers
+  //    keep rotation errors of 0.5-2 deg about the stickers (measured on the
+  //    xtion --hard case: camera centres 20 mm off), which place the stickers
+  //    consistently with each other but not with the body surface; tracking
+  //    needs them on the surface (model_from_marker). So every frame that
+  //    sees stickers is registered to the finished reconstruction (GICP) and
+  //    the sticker map is rebuilt from those cameras alone.
+  if (options_.stickers_on_surface) {
+    Step("placing the stickers on the reconstruction", 0.66);
+    const auto t_surface = Clock::now();
+    std::vector<BodyScanView> views;
+    for (ScanFrame& f : frames) {
+      if (!f.posed || !f.sticker_cloud || f.view.markers.empty()) continue;
+      const ReconstructionFrameReport r = builder.RegisterFrame(*f.sticker_cloud, f.view.room_from_camera);
+      f.sticker_cloud.reset();
+      if (!r.refined) continue;
+      f.surface_pose = anchor.Inverse() * r.world_from_camera;
+      BodyScanView v = f.view;
+      v.room_from_camera = *f.surface_pose;
+      views.push_back(v);
+    }
+    BodyMarkerMapResult on_surface = BuildBodyMarkerMap(views, camera, map_options);
+    result_.frames_registered_for_stickers = static_cast<int>(views.size());
+    if (static_cast<int>(on_surface.markers.size()) >= options_.min_stickers) {
+      result_.stickers_on_surface = true;
+      result_.marker_map = std::move(on_surface);
+    }
+    result_.times.marker_map_s += SecondsSince(t_surface);
+  }
+  for (const ScanFrame& f : frames) {
+    if (!f.posed) continue;
+    ScanCameraPose c;
+    c.timestamp_s = f.timestamp_s;
+    c.room_from_camera = f.surface_pose.value_or(f.view.room_from_camera);
+    c.from_stickers = f.by_stickers;
+    c.room_localized = f.localized;
+    c.registered_to_surface = f.surface_pose.has_value();
+    result_.scan_cameras.push_back(c);
   }
   const Eigen::Vector3d box_centre = recon_options.crop_box->frame_from_box.translation;
   const Eigen::Vector3d towards_cameras =

@@ -65,6 +65,11 @@ struct SessionStageOptions {
   /// Take the mean of the reconstruction frames' GICP corrections off the
   /// fused cloud (it otherwise carries the first frame's pose error).
   bool average_anchor = true;
+  /// Rebuild the sticker map from the frames that see stickers, each
+  /// registered to the finished reconstruction (GICP), so the stickers sit
+  /// where the body surface is (see the controller, step 4). Off: the map
+  /// from the sticker-consistent cameras.
+  bool stickers_on_surface = true;
   /// Fewer mapped body stickers than this: the stage stops with an error
   /// (tracking follows the patient by them; one or two give a weak pose).
   int min_stickers = 3;
@@ -80,6 +85,20 @@ struct SessionStepTimes {
          alignment_s = 0, store_s = 0, total_s = 0;
 };
 
+/// The final camera pose of one considered body-scan frame and where it
+/// came from: the stickers (a frame with two or more mapped stickers, moved
+/// into the room by the one room offset) or the room map alone, then, for
+/// frames that see stickers, registration to the reconstruction.
+struct ScanCameraPose {
+  double timestamp_s = 0;
+  Rigid3d room_from_camera;
+  bool from_stickers = false;
+  bool room_localized = false;  ///< the room map localised this frame too
+  /// Registered to the finished reconstruction (then room_from_camera is
+  /// that pose; the sticker map is built from these frames).
+  bool registered_to_surface = false;
+};
+
 struct SessionStageResult {
   PlanId plan_id;
   SessionId session_id;
@@ -93,6 +112,13 @@ struct SessionStageResult {
   /// Frames the room map could not localise, posed from mapped stickers.
   int frames_posed_by_stickers = 0;
   BodyMarkerMapResult marker_map;
+  /// Every considered frame that got a final pose, in scan order.
+  std::vector<ScanCameraPose> scan_cameras;
+  /// Frames registered to the reconstruction for the sticker map, and
+  /// whether the final map comes from them (false: too few stickers that way,
+  /// the map from the sticker-consistent cameras kept).
+  int frames_registered_for_stickers = 0;
+  bool stickers_on_surface = true;
   int reconstruction_points = 0;
   /// Frames offered to the reconstruction and those fused (a frame whose
   /// GICP correction is refused is left out).

@@ -106,6 +106,77 @@ PointCloud ReconstructionBuilder::Centroids() const {
   return cloud;
 }
 
+struct ReconstructionBuilder::Target {
+  double voxel_m = 0;
+  PointCloud cloud;
+  std::unique_ptr<KdTree> tree;
+};
+
+void ReconstructionBuilder::Refine(const PointCloud& cloud, const Rigid3d& world_from_camera, double voxel_m,
+                                   ReconstructionFrameReport* report) {
+  NormalOptions local;
+  local.k = options_.registration.neighbors;
+  local.covariance_epsilon = options_.registration.covariance_epsilon;
+  local.num_threads = options_.num_threads;
+  PointCloud source = VoxelDownsample(cloud, voxel_m);
+  if (!target_ || target_->voxel_m != voxel_m) {
+    auto t = std::make_shared<Target>();
+    t->voxel_m = voxel_m;
+    t->cloud = Centroids();
+    if (voxel_m > options_.output_voxel_m) t->cloud = VoxelDownsample(t->cloud, voxel_m);
+    if (t->cloud.size() >= 10) {
+      t->tree = std::make_unique<KdTree>(t->cloud);
+      EstimateCovariances(&t->cloud, *t->tree, local);
+    }
+    target_ = t;
+  }
+  const PointCloud& target = target_->cloud;
+  if (source.size() < 10 || target.size() < 10) {
+    report->message = "too few points to refine";
+    return;
+  }
+  const KdTree source_tree(source);
+  EstimateCovariances(&source, source_tree, local);
+  report->registration = AlignGicp(source, target, *target_->tree, world_from_camera, options_.registration);
+  const Rigid3d& refined = report->registration.target_from_source;
+  // Size of the correction where the frame's points are, not at the
+  // world origin.
+  const Eigen::Vector3d centre = source.Centroid();
+  const double moved_m = (refined * centre - world_from_camera * centre).norm();
+  const double turned_rad = RotationAngleRad(refined.rotation * world_from_camera.rotation.conjugate());
+  if (!report->registration.converged) {
+    report->message = "GICP did not converge (" + report->registration.message + ")";
+  } else if (report->registration.fitness < options_.min_fitness) {
+    report->message = "GICP fitness " + std::to_string(report->registration.fitness) + " below " +
+                      std::to_string(options_.min_fitness);
+  } else if (moved_m > options_.max_correction_m || turned_rad > options_.max_correction_rad) {
+    report->message = "GICP correction too large (" + std::to_string(1e3 * moved_m) + " mm, " +
+                      std::to_string(DegFromRad(turned_rad)) + " deg)";
+  } else {
+    report->refined = true;
+    report->world_from_camera = refined;
+  }
+}
+
+ReconstructionFrameReport ReconstructionBuilder::RegisterFrame(const PointCloud& cloud_in_camera,
+                                                               const Rigid3d& world_from_camera) {
+  ReconstructionFrameReport report;
+  const double start_s = NowS();
+  report.world_from_camera = world_from_camera;
+  const PointCloud cloud = Crop(cloud_in_camera, world_from_camera);
+  report.points_in = static_cast<int>(cloud.size());
+  report.voxel_m = std::max(CurrentVoxel(), options_.output_voxel_m);
+  if (voxels_.empty() || cloud.size() < 10) {
+    report.message = voxels_.empty() ? "the reconstruction is empty" : "too few points to refine";
+  } else {
+    Refine(cloud, world_from_camera, report.voxel_m, &report);
+  }
+  report.correction = report.world_from_camera * world_from_camera.Inverse();
+  report.reconstruction_points = static_cast<int>(voxels_.size());
+  report.seconds = NowS() - start_s;
+  return report;
+}
+
 ReconstructionFrameReport ReconstructionBuilder::AddFrame(const PointCloud& cloud_in_camera,
                                                           const Rigid3d& world_from_camera) {
   ReconstructionFrameReport report;
@@ -120,42 +191,9 @@ ReconstructionFrameReport ReconstructionBuilder::AddFrame(const PointCloud& clou
   report.world_from_camera = world_from_camera;
 
   if (options_.refine_poses && !voxels_.empty() && cloud.size() >= 10) {
-    NormalOptions local;
-    local.k = options_.registration.neighbors;
-    local.covariance_epsilon = options_.registration.covariance_epsilon;
-    local.num_threads = options_.num_threads;
-    PointCloud source = VoxelDownsample(cloud, report.voxel_m);
-    PointCloud target = Centroids();
-    if (report.voxel_m > options_.output_voxel_m) target = VoxelDownsample(target, report.voxel_m);
-    if (source.size() >= 10 && target.size() >= 10) {
-      const KdTree source_tree(source);
-      EstimateCovariances(&source, source_tree, local);
-      const KdTree target_tree(target);
-      EstimateCovariances(&target, target_tree, local);
-      report.registration =
-          AlignGicp(source, target, target_tree, world_from_camera, options_.registration);
-      const Rigid3d& refined = report.registration.target_from_source;
-      // Size of the correction where the frame's points are, not at the
-      // world origin.
-      const Eigen::Vector3d centre = source.Centroid();
-      const double moved_m = (refined * centre - world_from_camera * centre).norm();
-      const double turned_rad =
-          RotationAngleRad(refined.rotation * world_from_camera.rotation.conjugate());
-      if (!report.registration.converged) {
-        report.message = "GICP did not converge (" + report.registration.message + ")";
-      } else if (report.registration.fitness < options_.min_fitness) {
-        report.message = "GICP fitness " + std::to_string(report.registration.fitness) +
-                         " below " + std::to_string(options_.min_fitness);
-      } else if (moved_m > options_.max_correction_m || turned_rad > options_.max_correction_rad) {
-        report.message = "GICP correction too large (" + std::to_string(1e3 * moved_m) +
-                         " mm, " + std::to_string(DegFromRad(turned_rad)) + " deg)";
-      } else {
-        report.refined = true;
-        report.world_from_camera = refined;
-      }
-    } else {
-      report.message = "too few points to refine";
-    }
+    target_.reset();
+    Refine(cloud, world_from_camera, report.voxel_m, &report);
+    target_.reset();  // the reconstruction changes below
   }
   report.correction = report.world_from_camera * world_from_camera.Inverse();
   const bool refinement_refused = options_.refine_poses && !voxels_.empty() && !report.refined;

@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <memory>
 #include <unordered_map>
 #include <vector>
 
@@ -89,6 +90,15 @@ class ReconstructionBuilder {
   ReconstructionFrameReport AddFrame(const PointCloud& cloud_in_camera,
                                      const Rigid3d& world_from_camera);
 
+  /// Registers a frame to the reconstruction as it is now (the same crop,
+  /// voxel size d_i, GICP and acceptance checks as AddFrame) without fusing
+  /// it or counting it as offered: `refined` says whether
+  /// `world_from_camera` is the GICP-corrected pose (else the given one and
+  /// `message` says why). For posing frames after the fact, e.g. the
+  /// body-scan frames that see stickers. The prepared target is cached until
+  /// the next AddFrame.
+  ReconstructionFrameReport RegisterFrame(const PointCloud& cloud_in_camera, const Rigid3d& world_from_camera);
+
   /// The fused cloud (world frame): one centroid per occupied output voxel
   /// seen by at least `min_points_per_voxel` points, with k-NN normals
   /// oriented towards the cameras that saw it. Deterministic order.
@@ -109,6 +119,13 @@ class ReconstructionBuilder {
   };
   PointCloud Crop(const PointCloud& cloud_in_camera, const Rigid3d& world_from_camera) const;
   PointCloud Centroids() const;
+  // GICP of the cropped `cloud` (world_from_camera given) against the
+  // reconstruction at voxel `voxel_m`; fills the report's registration,
+  // refined, world_from_camera and message.
+  void Refine(const PointCloud& cloud, const Rigid3d& world_from_camera, double voxel_m,
+              ReconstructionFrameReport* report);
+  struct Target;
+  std::shared_ptr<Target> target_;  ///< prepared target (RegisterFrame), reset by AddFrame
 
   ReconstructionOptions options_;
   std::unordered_map<uint64_t, Voxel> voxels_;

@@ -100,6 +100,37 @@ int main(int argc, char** argv) {
                 Mean(model_sticker_mm), Percentile(model_sticker_mm, 1.0), Mean(model_sticker_deg),
                 Percentile(model_sticker_deg, 1.0));
 
+    // Final scan cameras against the camera ground truth, by where their
+    // pose came from; error in camera axes (z: along the optical axis).
+    {
+      const auto cam_gt = ReadTrajectory(case_dir / "body_scan" / "groundtruth.txt");
+      for (int kind = 0; kind < 4; ++kind) {
+        std::vector<double> err_mm, lateral_mm, axial_mm, deg;
+        for (const ScanCameraPose& c : r.scan_cameras) {
+          const int k = c.registered_to_surface ? 3 : c.from_stickers ? (c.room_localized ? 1 : 2) : 0;
+          if (k != kind) continue;
+          for (const auto& g : cam_gt) {
+            if (std::abs(g.timestamp_s - c.timestamp_s) > 1e-3) continue;
+            const PoseError e = ComputePoseError(g.room_from_x, c.room_from_camera);
+            // Camera-centre error in the true camera's axes.
+            const Eigen::Vector3d d = g.room_from_x.rotation.inverse() *
+                                      (c.room_from_camera.translation - g.room_from_x.translation);
+            err_mm.push_back(e.translation_mm);
+            lateral_mm.push_back(1000 * d.head<2>().norm());
+            axial_mm.push_back(1000 * d.z());
+            deg.push_back(e.rotation_deg);
+          }
+        }
+        static const char* kNames[] = {"room map only", "stickers, room-localised too", "stickers only",
+                                       "registered to the reconstruction"};
+        if (err_mm.empty()) continue;
+        std::printf("scan cameras (%s): %zu, centre error mean %.2f mm, median %.2f, max %.2f (lateral mean %.2f, "
+                    "along the axis mean %+.2f); rotation mean %.3f deg\n",
+                    kNames[kind], err_mm.size(), Mean(err_mm), Percentile(err_mm, 0.5), Percentile(err_mm, 1.0),
+                    Mean(lateral_mm), Mean(axial_mm), Mean(deg));
+      }
+    }
+
     // Reconstruction surface error against the true surface.
     const TriangleMesh model = LoadTriangleMesh(case_dir / "reference_model.ply");
     PointCloud surface = SampleMeshSurface(model, 0.0005);
