@@ -180,12 +180,19 @@ int main(int argc, char** argv) {
       const Sequence seq = Sequence::Open(dir);
       CameraLocalizer localizer(build.map, folder.config.camera, options);
       std::vector<StampedPose> est;
+      int lost = 0, lost_with_marker = 0;  // lost frames, and those with a mapped room marker detected
       double ms = 0;
       LocalizationTimings sum_t;
       for (size_t i = 0; i < seq.size(); ++i) {
         const RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
         const LocalizationResult r = localizer.Localize(frame);
         if (r.ok) est.push_back({frame.timestamp_s, r.room_from_camera});
+        if (!r.ok) {
+          ++lost;
+          bool marker = false;
+          for (const auto& o : r.markers) marker |= o.status == MarkerStatus::kRefined;
+          lost_with_marker += marker ? 1 : 0;
+        }
         ms += r.timings.total_ms;
         sum_t.detection_ms += r.timings.detection_ms;
         sum_t.keypoints_ms += r.timings.keypoints_ms;
@@ -194,6 +201,8 @@ int main(int argc, char** argv) {
         sum_t.refinement_ms += r.timings.refinement_ms;
       }
       const TrajectoryEvaluation e = EvaluateTrajectory(*seq.CameraGroundTruth(), est);
+      std::cout << StringPrintf("  %s lost %d frame(s), %d of them with a mapped room marker detected\n", name.c_str(),
+                                lost, lost_with_marker);
       {
         // What the camera error does to the patient: the isocentre seen by
         // the true camera, put into the room by the estimated camera.
