@@ -360,10 +360,22 @@ void SessionPage::ShowSession(int row) {
   const auto maps = state_->database->ListBodyMarkerMapIds(session);
   if (!maps.empty()) {
     if (const auto map = state_->database->GetBodyMarkerMap(maps.back())) {
-      lines << tr("Body marker map: %1 stickers, corner residual mean %2 px, max %3 px.")
+      lines << tr("Body marker map: %1 stickers (green), corner residual mean %2 px, max %3 px.")
                    .arg(map->markers.size())
                    .arg(map->mean_residual_px, 0, 'f', 3)
                    .arg(map->max_residual_px, 0, 'f', 3);
+      // Each sticker as its printed square, 2 mm above the skin so the
+      // surfaces do not hide it.
+      TriangleMesh stickers;
+      const float h = static_cast<float>(map->marker_size_m / 2);
+      const Eigen::Vector3f square[4] = {{-h, h, 0.002f}, {h, h, 0.002f}, {h, -h, 0.002f}, {-h, -h, 0.002f}};
+      for (const auto& m : map->markers) {
+        const int base = static_cast<int>(stickers.vertices.size());
+        for (const auto& c : square) stickers.vertices.push_back((m.body_from_marker * c.cast<double>()).cast<float>());
+        stickers.faces.emplace_back(base, base + 1, base + 2);
+        stickers.faces.emplace_back(base, base + 2, base + 3);
+      }
+      if (!stickers.empty()) model_view_->SetMesh("stickers", stickers, Rigid3d::Identity(), 0.15, 0.85, 0.25);
     }
   }
   const auto reconstructions = state_->database->ListReconstructionIds(session);
