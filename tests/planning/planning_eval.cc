@@ -192,6 +192,14 @@ int main(int argc, char** argv) {
           bool marker = false;
           for (const auto& o : r.markers) marker |= o.status == MarkerStatus::kRefined;
           lost_with_marker += marker ? 1 : 0;
+          if (marker && std::getenv("LOST_DIAG")) {
+            std::cout << StringPrintf("    lost t=%.3f: %zu marker(s) [", frame.timestamp_s, r.markers.size());
+            for (const auto& o : r.markers) {
+              std::cout << StringPrintf(" %d:%s side %.0fpx", o.id, MarkerStatusName(o.status), o.MeanSidePx());
+            }
+            std::cout << StringPrintf(" ] sigma %.1f mm, marker rms %.2f px, kp rms %.2f: %s\n", r.position_sigma_mm,
+                                      r.marker_rms_px, r.keypoint_rms_px, r.message.c_str());
+          }
         }
         ms += r.timings.total_ms;
         sum_t.detection_ms += r.timings.detection_ms;
