@@ -118,7 +118,7 @@ struct SessionStageResult {
   /// whether the final map comes from them (false: too few stickers that way,
   /// the map from the sticker-consistent cameras kept).
   int frames_registered_for_stickers = 0;
-  bool stickers_on_surface = true;
+  bool stickers_on_surface = false;
   int reconstruction_points = 0;
   /// Frames offered to the reconstruction and those fused (a frame whose
   /// GICP correction is refused is left out).
