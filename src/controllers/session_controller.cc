@@ -422,20 +422,6 @@ void SessionController::Run() {
   t_markers += SecondsSince(t0);
   result_.times.localization_s = t_localize;
   result_.times.marker_map_s = t_markers;
-  if (static_cast<int>(result_.marker_map.markers.size()) < options_.min_stickers) {
-    // Tracking follows the patient by these stickers: without enough of
-    // them the rest of the stage would store a session nobody can track.
-    std::ostringstream why;
-    why << folder.body_scan_dir.string() << ": " << result_.marker_map.markers.size()
-        << " body sticker(s) mapped (ids " << folder.config.body_markers.id_min << "-"
-        << folder.config.body_markers.id_max << "), tracking needs at least " << options_.min_stickers;
-    if (!result_.marker_map.rejected.empty()) {
-      why << "; seen but left out:";
-      for (const auto& [id, reason] : result_.marker_map.rejected) why << " " << id << " (" << reason << ")";
-    }
-    why << ". Put stickers on skin the camera sees and record the scan again";
-    ARPOS_INPUT_ERROR(why.str());
-  }
 
   // 3. Reconstruction from the final poses.
   Step("fusing the depth", 0.6);
@@ -534,6 +520,20 @@ void SessionController::Run() {
     ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
                       << ": no usable body surface in the scan (" << body.size()
                       << " points near the planned patient position after removing the couch)");
+  }
+  if (static_cast<int>(result_.marker_map.markers.size()) < options_.min_stickers) {
+    // Tracking follows the patient by these stickers: without enough of
+    // them the rest of the stage would store a session nobody can track.
+    std::ostringstream why;
+    why << folder.body_scan_dir.string() << ": " << result_.marker_map.markers.size()
+        << " body sticker(s) mapped (ids " << folder.config.body_markers.id_min << "-"
+        << folder.config.body_markers.id_max << "), tracking needs at least " << options_.min_stickers;
+    if (!result_.marker_map.rejected.empty()) {
+      why << "; seen but left out:";
+      for (const auto& [id, reason] : result_.marker_map.rejected) why << " " << id << " (" << reason << ")";
+    }
+    why << ". Put stickers on skin the camera sees and record the scan again";
+    ARPOS_INPUT_ERROR(why.str());
   }
 
   Step("meshing (Poisson)", 0.7);
