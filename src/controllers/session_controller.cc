@@ -640,8 +640,13 @@ void SessionController::Run() {
     result_.body_marker_map_id = database_->AddBodyMarkerMap(map);
     database_->AppendAudit({AuditId(), 0, options_.actor, "add_body_marker_map",
                             "body_marker_map:" + std::to_string(result_.body_marker_map_id.value()),
-                            StringPrintf("%zu stickers, mean rms %.3f px", map.markers.size(),
-                                         map.mean_residual_px)});
+                            StringPrintf("%zu stickers, mean rms %.3f px, %s", map.markers.size(),
+                                         map.mean_residual_px,
+                                         result_.stickers_on_surface
+                                             ? StringPrintf("cameras registered to the reconstruction (%d frames)",
+                                                            result_.frames_registered_for_stickers)
+                                                   .c_str()
+                                             : "sticker-consistent cameras")});
 
     ReconstructionRecord recon;
     recon.session_id = result_.session_id;
