@@ -142,6 +142,11 @@ std::string SessionStageResult::Summary() const {
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
       times.marker_map_s, times.reconstruction_s, times.mesh_s, times.alignment_s, times.store_s,
       times.total_s);
+  if (surface_offset_frames >= 3) {
+    out << StringPrintf("room offset from %d room-localised frames registered to the reconstruction: %.2f mm at "
+                        "the stickers\n",
+                        surface_offset_frames, 1000 * surface_offset_shift_m.norm());
+  }
   return out.str();
 }
 
@@ -301,7 +306,8 @@ void SessionController::Run() {
     bool by_stickers = false;  ///< posed from mapped stickers (last round)
     BodyScanView view;         ///< stickers (room_from_camera: final pose)
     std::optional<PointCloud> cloud;
-    std::optional<PointCloud> sticker_cloud;  ///< frames with stickers, for step 4
+    std::optional<PointCloud> sticker_cloud;  ///< frames with stickers or a room pose, for steps 4-5
+    Rigid3d room_map_pose;                    ///< the room map's pose (when localized)
     std::optional<Rigid3d> surface_pose;      ///< registered to the reconstruction (step 4)
   };
   std::vector<ScanFrame> frames;
@@ -321,13 +327,14 @@ void SessionController::Run() {
     f.timestamp_s = frame.timestamp_s;
     f.localized = located.ok;
     f.room_from_camera = located.room_from_camera;
+    f.room_map_pose = located.room_from_camera;
     result_.frames_localized += located.ok ? 1 : 0;
     t0 = Clock::now();
     f.view = MakeBodyScanView(frame, located.ok ? located.room_from_camera : Rigid3d::Identity(), &detector,
                               camera, sticker_size);
     t_markers += SecondsSince(t0);
     if (for_recon) f.cloud = DepthToCloud(frame, camera, depth_options);
-    if (options_.stickers_on_surface && for_markers && !f.view.markers.empty()) {
+    if (options_.stickers_on_surface && for_markers && (!f.view.markers.empty() || f.localized)) {
       // Kept thinned: registered to the reconstruction at >= 1 cm voxels.
       f.sticker_cloud = VoxelDownsample(f.cloud ? *f.cloud : DepthToCloud(frame, camera, depth_options), 0.004);
     }
@@ -475,11 +482,12 @@ void SessionController::Run() {
     const auto t_surface = Clock::now();
     std::vector<BodyScanView> views;
     for (ScanFrame& f : frames) {
-      if (!f.posed || !f.sticker_cloud || f.view.markers.empty()) continue;
+      if (!f.posed || !f.sticker_cloud) continue;
       const ReconstructionFrameReport r = builder.RegisterFrame(*f.sticker_cloud, f.view.room_from_camera);
       f.sticker_cloud.reset();
       if (!r.refined) continue;
       f.surface_pose = anchor.Inverse() * r.world_from_camera;
+      if (f.view.markers.empty()) continue;
       BodyScanView v = f.view;
       v.room_from_camera = *f.surface_pose;
       views.push_back(v);
@@ -491,6 +499,35 @@ void SessionController::Run() {
       result_.marker_map = std::move(on_surface);
     }
     result_.times.marker_map_s += SecondsSince(t_surface);
+  }
+  // 5. The room offset again, now from every room-localised frame that
+  //    registered to the reconstruction (step 2 could use only frames with
+  //    two mapped stickers): its room-map pose against its pose on the
+  //    surface, robust mean at the stickers' centre, applied to everything.
+  if (options_.room_offset_from_surface && result_.stickers_on_surface) {
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (const auto& m : result_.marker_map.markers) centre += m.room_from_marker.translation;
+    centre /= static_cast<double>(std::max<size_t>(1, result_.marker_map.markers.size()));
+    std::vector<Offset> offsets;
+    for (const ScanFrame& f : frames) {
+      if (!f.localized || !f.surface_pose) continue;
+      const Rigid3d d = f.room_map_pose * f.surface_pose->Inverse();
+      Offset v;
+      v << d.RotationVector(), d * centre - centre;
+      offsets.push_back(v);
+    }
+    result_.surface_offset_frames = static_cast<int>(offsets.size());
+    if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3)) {
+      const Rigid3d& C = *delta;
+      result_.surface_offset_shift_m = C * centre - centre;
+      fused.Transform(C);
+      for (ScanFrame& f : frames) {
+        if (f.surface_pose) f.surface_pose = C * *f.surface_pose;
+        if (f.posed) f.view.room_from_camera = C * f.view.room_from_camera;
+      }
+      for (auto& m : result_.marker_map.markers) m.room_from_marker = C * m.room_from_marker;
+      for (auto& p : camera_poses) p.room_from_x = C * p.room_from_x;
+    }
   }
   for (const ScanFrame& f : frames) {
     if (!f.posed) continue;

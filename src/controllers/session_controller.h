@@ -70,6 +70,9 @@ struct SessionStageOptions {
   /// where the body surface is (see the controller, step 4). Off: the map
   /// from the sticker-consistent cameras.
   bool stickers_on_surface = true;
+  /// Then the room offset again from every room-localised frame registered
+  /// to the reconstruction (see the controller, step 5).
+  bool room_offset_from_surface = true;
   /// Fewer mapped body stickers than this: the stage stops with an error
   /// (tracking follows the patient by them; one or two give a weak pose).
   int min_stickers = 3;
@@ -119,6 +122,10 @@ struct SessionStageResult {
   /// the map from the sticker-consistent cameras kept).
   int frames_registered_for_stickers = 0;
   bool stickers_on_surface = false;
+  /// Room-localised frames behind the second room offset (step 5; fewer
+  /// than 3: none applied) and the shift it gave the stickers' centre (m).
+  int surface_offset_frames = 0;
+  Eigen::Vector3d surface_offset_shift_m = Eigen::Vector3d::Zero();
   int reconstruction_points = 0;
   /// Frames offered to the reconstruction and those fused (a frame whose
   /// GICP correction is refused is left out).
