@@ -434,16 +434,12 @@ void SessionController::Run() {
   Step("fusing the depth", 0.6);
   t0 = Clock::now();
   std::vector<StampedPose> camera_poses;
-  std::vector<const ScanFrame*> recon_frame;  // parallel to recon_reports
   Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
   for (const ScanFrame& f : frames) {
     if (!f.posed) continue;
     camera_poses.push_back({f.timestamp_s, f.room_from_camera});
     camera_centre_sum += f.room_from_camera.translation;
-    if (f.cloud) {
-      recon_reports.push_back(builder.AddFrame(*f.cloud, f.room_from_camera));
-      recon_frame.push_back(&f);
-    }
+    if (f.cloud) recon_reports.push_back(builder.AddFrame(*f.cloud, f.room_from_camera));
   }
   t_recon += SecondsSince(t0);
 

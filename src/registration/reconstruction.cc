@@ -165,7 +165,7 @@ ReconstructionFrameReport ReconstructionBuilder::RegisterFrame(const PointCloud&
   report.world_from_camera = world_from_camera;
   const PointCloud cloud = Crop(cloud_in_camera, world_from_camera);
   report.points_in = static_cast<int>(cloud.size());
-  report.voxel_m = std::max(CurrentVoxel(), options_.output_voxel_m);
+  report.voxel_m = options_.output_voxel_m;
   if (voxels_.empty() || cloud.size() < 10) {
     report.message = voxels_.empty() ? "the reconstruction is empty" : "too few points to refine";
   } else {
