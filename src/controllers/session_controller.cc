@@ -333,11 +333,15 @@ void SessionController::Run() {
     f.view = MakeBodyScanView(frame, located.ok ? located.room_from_camera : Rigid3d::Identity(), &detector,
                               camera, sticker_size);
     t_markers += SecondsSince(t0);
+    t0 = Clock::now();
     if (for_recon) f.cloud = DepthToCloud(frame, camera, depth_options);
+    t_recon += SecondsSince(t0);
+    t0 = Clock::now();
     if (options_.stickers_on_surface && for_markers && (!f.view.markers.empty() || f.localized)) {
-      // Kept thinned: registered to the reconstruction at >= 1 cm voxels.
+      // Kept thinned: registered to the reconstruction at 1 cm voxels (step 4).
       f.sticker_cloud = VoxelDownsample(f.cloud ? *f.cloud : DepthToCloud(frame, camera, depth_options), 0.004);
     }
+    t_markers += SecondsSince(t0);
     frames.push_back(std::move(f));
   }
   if (result_.frames_localized == 0) {
@@ -466,6 +470,7 @@ void SessionController::Run() {
     result_.anchor_rotation_deg = DegFromRad(correction.RotationVector().norm());
     anchor = correction;
   }
+  t_recon += SecondsSince(t0);  // step 4 counts as the sticker map's time
   // 4. The stickers on today's surface. Cameras posed from 3 cm stickers
   //    keep rotation errors of 0.5-2 deg about the stickers (measured on the
   //    xtion --hard case: camera centres 20 mm off), which place the stickers
@@ -525,6 +530,7 @@ void SessionController::Run() {
       for (auto& p : camera_poses) p.room_from_x = C * p.room_from_x;
     }
   }
+  t0 = Clock::now();
   for (const ScanFrame& f : frames) {
     if (!f.posed) continue;
     ScanCameraPose c;
