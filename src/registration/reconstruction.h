@@ -25,9 +25,9 @@
 /// const. Nothing is printed.
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
-#include <memory>
 #include <unordered_map>
 #include <vector>
 

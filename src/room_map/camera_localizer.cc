@@ -69,7 +69,6 @@ std::string CameraLocalizerOptions::Validate() const {
     out << "match ratios must be in (0, 1]";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
-
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
   else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
   else if (min_marker_corners < 4 || min_keypoints < 6 || min_keypoints_tracking < 6)
