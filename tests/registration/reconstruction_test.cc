@@ -50,7 +50,9 @@ Built BuildFromPerturbedPoses(bool refine, double target_points = 5e4) {
     const Rigid3d given = f.room_from_camera * noise;
     const ReconstructionFrameReport report = builder.AddFrame(f.body_in_camera, given);
     EXPECT_TRUE(report.used);
-    if (refine && i > 0) EXPECT_TRUE(report.refined) << i << ": " << report.message;
+    if (refine && i > 0) {
+      EXPECT_TRUE(report.refined) << i << ": " << report.message;
+    }
     const Eigen::Vector3d c = f.body_in_camera.Centroid();
     built.given_error_m.push_back((given * c - f.room_from_camera * c).norm());
     built.pose_error_m.push_back((report.world_from_camera * c - f.room_from_camera * c).norm());
