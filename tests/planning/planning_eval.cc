@@ -9,7 +9,7 @@
 // --store DB uses the newest room map in DB instead of building one.
 // Diagnostics by environment: NO_LOC=1 (map only), TRUTH_MARKERS=1 (localise
 // against the true marker poses), AXES=1 (camera error in camera axes),
-// MIN_LM_OBS, MAX_LM, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M (option overrides).
+// MIN_LM_OBS, MAX_LM, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
 // camera error does to the patient's position).
@@ -168,6 +168,7 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("SUPPORT_PX")) options.marker_support_side_px = std::atof(v);
     if (const char* v = std::getenv("CORNER_FLOOR")) options.marker_corner_sigma_px = std::atof(v);
     if (const char* v = std::getenv("RELOC_SIGMA_M")) options.max_relocalisation_position_sigma_m = std::atof(v);
+    if (const char* v = std::getenv("MAX_SIGMA_M")) options.max_position_sigma_m = std::atof(v);
     if (depth_quad >= 0) options.depth_sigma_quad_per_m = depth_quad;
     if (depth_const >= 0) options.depth_sigma_const_m = depth_const;
     std::vector<std::pair<std::string, std::filesystem::path>> sequences = {{"room", folder.room_dir},
