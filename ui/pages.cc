@@ -16,6 +16,7 @@
 #include <QTableWidget>
 #include <QTextStream>
 #include <QVBoxLayout>
+#include <algorithm>
 #include <fstream>
 
 #include "controllers/run_case_controller.h"
@@ -179,8 +180,56 @@ void PlanningPage::ShowLatestPlan() {
                      1000 * target.translation.y(), 1000 * target.translation.z(), r_deg.x(), r_deg.y(),
                      r_deg.z())));
   model_view_->SetMesh("target", FromStoredMesh(plan->reference_model), target, 0.25, 0.45, 0.95);
+  ShowRoomMap(plan->id);
   model_view_->ShowRoomAxes(0.3);
   model_view_->ResetCamera();
+}
+
+void PlanningPage::ShowRoomMap(PlanId plan) {
+  const auto id = state_->database->LatestRoomMap(plan);
+  const auto map = id ? state_->database->GetRoomMap(*id) : std::nullopt;
+  if (!map) {
+    plan_label_->setText(plan_label_->text() + tr("\nNo room map yet for this plan."));
+    return;
+  }
+  // Each mapped marker as its printed square (origin marker darker), each
+  // landmark as a 1 cm triangle facing up.
+  TriangleMesh markers, origin, landmarks;
+  for (const RoomMapMarker& m : map->markers) {
+    TriangleMesh& mesh = m.marker_id == map->origin_marker_id ? origin : markers;
+    const int base = static_cast<int>(mesh.vertices.size());
+    for (const auto& c : m.corners_in_room) mesh.vertices.push_back(c.cast<float>());
+    mesh.faces.emplace_back(base, base + 1, base + 2);
+    mesh.faces.emplace_back(base, base + 2, base + 3);
+  }
+  for (const auto& p : map->landmarks_in_room.points) {
+    const int base = static_cast<int>(landmarks.vertices.size());
+    landmarks.vertices.push_back(p + Eigen::Vector3f(-0.005f, -0.003f, 0));
+    landmarks.vertices.push_back(p + Eigen::Vector3f(0.005f, -0.003f, 0));
+    landmarks.vertices.push_back(p + Eigen::Vector3f(0, 0.006f, 0));
+    landmarks.faces.emplace_back(base, base + 1, base + 2);
+  }
+  if (!markers.empty()) model_view_->SetMesh("room markers", markers, Rigid3d::Identity(), 0.95, 0.6, 0.1);
+  if (!origin.empty()) model_view_->SetMesh("origin marker", origin, Rigid3d::Identity(), 0.75, 0.2, 0.05);
+  if (!landmarks.empty()) model_view_->SetMesh("landmarks", landmarks, Rigid3d::Identity(), 0.85, 0.85, 0.85);
+  // Residuals, worst markers first: what a technician checks before use.
+  std::vector<RoomMapMarker> sorted = map->markers;
+  std::sort(sorted.begin(), sorted.end(),
+            [](const RoomMapMarker& a, const RoomMapMarker& b) { return a.residual_px > b.residual_px; });
+  QStringList worst;
+  for (size_t i = 0; i < sorted.size() && i < 5; ++i) {
+    worst << tr("%1: %2 px in %3 views").arg(sorted[i].marker_id).arg(sorted[i].residual_px, 0, 'f', 3).arg(sorted[i].num_observations);
+  }
+  plan_label_->setText(plan_label_->text() +
+                       tr("\nRoom map %1: %2 markers (orange; origin %3 dark red), %4 keypoint landmarks (grey); "
+                          "marker corner residual mean %5 px, max %6 px. Largest: %7.")
+                           .arg(id->value())
+                           .arg(map->markers.size())
+                           .arg(map->origin_marker_id)
+                           .arg(map->landmarks_in_room.points.size())
+                           .arg(map->mean_residual_px, 0, 'f', 3)
+                           .arg(map->max_residual_px, 0, 'f', 3)
+                           .arg(worst.join(", ")));
 }
 
 void PlanningPage::ImportCase() {

@@ -5,6 +5,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "store/records.h"
 #include "ui/wizard.h"
 
 class QLabel;
@@ -49,6 +50,7 @@ class PlanningPage : public QWizardPage {
  private:
   void ImportCase();
   void ShowLatestPlan();
+  void ShowRoomMap(PlanId plan);  ///< the plan's newest room map in the view and the label
   WizardState* state_;
   ModelView* model_view_;
   QLabel* plan_label_;

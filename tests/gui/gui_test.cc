@@ -109,5 +109,32 @@ TEST_F(GuiTest, SessionPageShowsTheAlignedModelInRed) {
   EXPECT_GT(red, 300);
 }
 
+// After run-case, the planning page shows the room map: the mapped room
+// markers as orange squares (and its residuals in the label).
+TEST_F(GuiTest, PlanningPageShowsTheRoomMapMarkers) {
+  const auto sample = std::filesystem::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion";
+  const auto store = dir_.path() / "plan.db";
+  std::string out;
+  ASSERT_EQ(RunArpos("plan " + sample.string() + " --store " + store.string(), &out), 0) << out;
+  const auto png = dir_.path() / "planning_page.png";
+  out.clear();
+  ASSERT_EQ(RunArpos("gui --store " + store.string() + " --case " + sample.string() + " --page 1 --screenshot " +
+                         png.string(),
+                     &out),
+            0)
+      << out;
+  const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(shot.empty());
+  int orange = 0;
+  for (int y = 0; y < shot.rows; ++y) {
+    for (int x = 0; x < shot.cols; ++x) {
+      const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
+      if (p[2] > 180 && p[1] > 90 && p[1] < 200 && p[0] < 80) ++orange;
+    }
+  }
+  // Four or more markers of ~15 px squares seen from above.
+  EXPECT_GT(orange, 200);
+}
+
 }  // namespace
 }  // namespace arpos
