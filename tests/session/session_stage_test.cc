@@ -124,6 +124,15 @@ std::set<int> PaintOutStickers(const fs::path& case_dir, const std::function<boo
   return painted;
 }
 
+// The model pose the session wrote to `out_dir` against the case's body
+// ground truth (the patient lies still: the first frame's).
+PoseError ModelPoseErrorAtScanTime(const fs::path& case_dir, const fs::path& out_dir) {
+  const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
+  const auto estimate = ReadTrajectory(out_dir / "model_pose.txt");
+  ARPOS_CHECK(!truth.empty() && !estimate.empty(), "no model pose or no body ground truth");
+  return ComputePoseError(truth.front().room_from_x, estimate.front().room_from_x);
+}
+
 // run-case on `case_dir` into `db`; session outputs into `out_dir` if given.
 RunCaseResult RunCase(const fs::path& case_dir, Database* db, std::optional<fs::path> out_dir = std::nullopt) {
   RunCaseOptions options;
@@ -194,10 +203,7 @@ TEST(SessionStage, RoomOffsetFromFramesRegisteredToTheSurface) {
   ASSERT_TRUE(r.ok()) << r.Summary();
   EXPECT_NE(r.session_summary.find("placed from"), std::string::npos) << r.session_summary;
   EXPECT_NE(r.session_summary.find("room offset from"), std::string::npos) << r.session_summary;
-  const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
-  const auto estimate = ReadTrajectory(dir.path() / "out" / "model_pose.txt");
-  ASSERT_FALSE(estimate.empty());
-  const PoseError e = ComputePoseError(truth.front().room_from_x, estimate.front().room_from_x);
+  const PoseError e = ModelPoseErrorAtScanTime(case_dir, dir.path() / "out");
   EXPECT_LT(e.translation_mm, 3.0);
   EXPECT_LT(e.rotation_deg, 0.2);
 }
@@ -237,10 +243,7 @@ TEST(SessionStage, ScanWithHalfTheStickersHiddenMapsTheRest) {
   ASSERT_TRUE(map.has_value());
   EXPECT_GE(map->markers.size(), 3u);
   for (const auto& m : map->markers) EXPECT_EQ(hidden.count(m.marker_id), 0u) << "sticker " << m.marker_id << " was painted over";
-  const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
-  const auto estimate = ReadTrajectory(dir.path() / "out" / "model_pose.txt");
-  ASSERT_FALSE(estimate.empty());
-  const PoseError e = ComputePoseError(truth.front().room_from_x, estimate.front().room_from_x);
+  const PoseError e = ModelPoseErrorAtScanTime(case_dir, dir.path() / "out");
   EXPECT_LT(e.translation_mm, 5.0);
   EXPECT_LT(e.rotation_deg, 0.5);
 }
