@@ -17,10 +17,12 @@
 #include <QTextStream>
 #include <QVBoxLayout>
 #include <algorithm>
+#include <array>
 #include <fstream>
 
 #include "controllers/run_case_controller.h"
 #include "controllers/session_controller.h"
+#include "features/marker_pose.h"
 #include "geometry/so3.h"
 #include "sensor/case_check.h"
 #include "sensor/case_folder.h"
@@ -38,6 +40,14 @@ namespace arpos::ui {
 namespace {
 
 QString Q(const std::string& s) { return QString::fromStdString(s); }
+
+// Appends a flat quadrilateral (corners in order around it) as two triangles.
+void AddQuad(TriangleMesh* mesh, const std::array<Eigen::Vector3d, 4>& corners) {
+  const int base = static_cast<int>(mesh->vertices.size());
+  for (const auto& c : corners) mesh->vertices.push_back(c.cast<float>());
+  mesh->faces.emplace_back(base, base + 1, base + 2);
+  mesh->faces.emplace_back(base, base + 2, base + 3);
+}
 
 QPushButton* BrowseButton(QWidget* parent, QLineEdit* edit, bool folder) {
   auto* button = new QPushButton(QObject::tr("Browse…"), parent);
@@ -196,11 +206,7 @@ void PlanningPage::ShowRoomMap(PlanId plan) {
   // landmark as a 1 cm triangle facing up.
   TriangleMesh markers, origin, landmarks;
   for (const RoomMapMarker& m : map->markers) {
-    TriangleMesh& mesh = m.marker_id == map->origin_marker_id ? origin : markers;
-    const int base = static_cast<int>(mesh.vertices.size());
-    for (const auto& c : m.corners_in_room) mesh.vertices.push_back(c.cast<float>());
-    mesh.faces.emplace_back(base, base + 1, base + 2);
-    mesh.faces.emplace_back(base, base + 2, base + 3);
+    AddQuad(m.marker_id == map->origin_marker_id ? &origin : &markers, m.corners_in_room);
   }
   for (const auto& p : map->landmarks_in_room.points) {
     const int base = static_cast<int>(landmarks.vertices.size());
@@ -416,13 +422,10 @@ void SessionPage::ShowSession(int row) {
       // Each sticker as its printed square, 2 mm above the skin so the
       // surfaces do not hide it.
       TriangleMesh stickers;
-      const float h = static_cast<float>(map->marker_size_m / 2);
-      const Eigen::Vector3f square[4] = {{-h, h, 0.002f}, {h, h, 0.002f}, {h, -h, 0.002f}, {-h, -h, 0.002f}};
       for (const auto& m : map->markers) {
-        const int base = static_cast<int>(stickers.vertices.size());
-        for (const auto& c : square) stickers.vertices.push_back((m.body_from_marker * c.cast<double>()).cast<float>());
-        stickers.faces.emplace_back(base, base + 1, base + 2);
-        stickers.faces.emplace_back(base, base + 2, base + 3);
+        std::array<Eigen::Vector3d, 4> corners = MarkerCornersInMarker(map->marker_size_m);
+        for (auto& c : corners) c = m.body_from_marker * (c + Eigen::Vector3d(0, 0, 0.002));
+        AddQuad(&stickers, corners);
       }
       if (!stickers.empty()) model_view_->SetMesh("stickers", stickers, Rigid3d::Identity(), 0.15, 0.85, 0.25);
     }

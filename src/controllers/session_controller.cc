@@ -150,6 +150,24 @@ std::string SessionStageResult::Summary() const {
   return out.str();
 }
 
+namespace {
+
+// A small rigid offset as (rotation vector, shift it gives `centre`).
+Offset OffsetAt(const Rigid3d& offset, const Eigen::Vector3d& centre) {
+  Offset v;
+  v << offset.RotationVector(), offset * centre - centre;
+  return v;
+}
+
+// The mean position of the mapped stickers (zero without any).
+Eigen::Vector3d StickerCentre(const BodyMarkerMapResult& map) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& m : map.markers) centre += m.room_from_marker.translation;
+  return map.markers.empty() ? centre : centre / static_cast<double>(map.markers.size());
+}
+
+}  // namespace
+
 Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
                          const Eigen::Vector3d& centre) {
   // Per refined frame: its correction's rotation vector and the shift it
@@ -160,9 +178,7 @@ Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
   for (const auto& r : reports) {
     if (!r.used) continue;
     if (!first && !r.refined) continue;  // fused without a consistent correction
-    Offset v = Offset::Zero();
-    if (!first) v << r.correction.RotationVector(), r.correction * centre - centre;
-    offsets.push_back(v);
+    offsets.push_back(first ? Offset::Zero() : OffsetAt(r.correction, centre));
     first = false;
   }
   return RobustMeanOffset(offsets, centre, 1e-4, 3).value_or(Rigid3d::Identity());
@@ -298,16 +314,14 @@ void SessionController::Run() {
   // 1. Every considered frame: room localisation, stickers, and the depth
   //    cloud of reconstruction frames.
   struct ScanFrame {
-    size_t index = 0;
     double timestamp_s = 0;
     bool localized = false;
-    Rigid3d room_from_camera;  ///< room map's, then the final pose
+    Rigid3d room_from_camera;  ///< the room map's pose (when localized)
     bool posed = false;        ///< a final pose exists
     bool by_stickers = false;  ///< posed from mapped stickers (last round)
-    BodyScanView view;         ///< stickers (room_from_camera: final pose)
+    BodyScanView view;         ///< stickers (room_from_camera: the final pose)
     std::optional<PointCloud> cloud;
     std::optional<PointCloud> sticker_cloud;  ///< frames with stickers or a room pose, for steps 4-5
-    Rigid3d room_map_pose;                    ///< the room map's pose (when localized)
     std::optional<Rigid3d> surface_pose;      ///< registered to the reconstruction (step 4)
   };
   std::vector<ScanFrame> frames;
@@ -323,11 +337,9 @@ void SessionController::Run() {
     const LocalizationResult located = localizer.Localize(frame);
     t_localize += SecondsSince(t0);
     ScanFrame f;
-    f.index = i;
     f.timestamp_s = frame.timestamp_s;
     f.localized = located.ok;
     f.room_from_camera = located.room_from_camera;
-    f.room_map_pose = located.room_from_camera;
     result_.frames_localized += located.ok ? 1 : 0;
     t0 = Clock::now();
     f.view = MakeBodyScanView(frame, located.ok ? located.room_from_camera : Rigid3d::Identity(), &detector,
@@ -392,16 +404,10 @@ void SessionController::Run() {
   if (sticker_posed > 0) {
     // room_from_camera(room map) * camera_from_room(sticker frame), per frame,
     // as a rotation vector and the shift of the stickers' centre.
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (const auto& m : map.markers) centre += m.room_from_marker.translation;
-    if (!map.markers.empty()) centre /= static_cast<double>(map.markers.size());
+    const Eigen::Vector3d centre = StickerCentre(map);
     std::vector<Offset> offsets;
     for (const ScanFrame& f : frames) {
-      if (!f.localized || !f.posed) continue;
-      const Rigid3d d = f.room_from_camera * f.view.room_from_camera.Inverse();
-      Offset v;
-      v << d.RotationVector(), d * centre - centre;
-      offsets.push_back(v);
+      if (f.localized && f.posed) offsets.push_back(OffsetAt(f.room_from_camera * f.view.room_from_camera.Inverse(), centre));
     }
     // Equal weights: the localiser's sigmas leave out map errors (two frames
     // 0.05 deg apart by their sigmas differed by 0.4 deg), and weighting by
@@ -413,7 +419,6 @@ void SessionController::Run() {
     for (ScanFrame& f : frames) {
       if (f.posed) {
         f.view.room_from_camera = room_from_sticker_frame * f.view.room_from_camera;
-        f.room_from_camera = f.view.room_from_camera;
       } else if (f.localized) {
         f.view.room_from_camera = f.room_from_camera;  // fewer than two stickers: the room pose
         f.posed = true;
@@ -441,9 +446,9 @@ void SessionController::Run() {
   Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
   for (const ScanFrame& f : frames) {
     if (!f.posed) continue;
-    camera_poses.push_back({f.timestamp_s, f.room_from_camera});
-    camera_centre_sum += f.room_from_camera.translation;
-    if (f.cloud) recon_reports.push_back(builder.AddFrame(*f.cloud, f.room_from_camera));
+    camera_poses.push_back({f.timestamp_s, f.view.room_from_camera});
+    camera_centre_sum += f.view.room_from_camera.translation;
+    if (f.cloud) recon_reports.push_back(builder.AddFrame(*f.cloud, f.view.room_from_camera));
   }
   t_recon += SecondsSince(t0);
 
@@ -506,16 +511,10 @@ void SessionController::Run() {
   //    two mapped stickers): its room-map pose against its pose on the
   //    surface, robust mean at the stickers' centre, applied to everything.
   if (options_.room_offset_from_surface && result_.stickers_on_surface) {
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (const auto& m : result_.marker_map.markers) centre += m.room_from_marker.translation;
-    centre /= static_cast<double>(std::max<size_t>(1, result_.marker_map.markers.size()));
+    const Eigen::Vector3d centre = StickerCentre(result_.marker_map);
     std::vector<Offset> offsets;
     for (const ScanFrame& f : frames) {
-      if (!f.localized || !f.surface_pose) continue;
-      const Rigid3d d = f.room_map_pose * f.surface_pose->Inverse();
-      Offset v;
-      v << d.RotationVector(), d * centre - centre;
-      offsets.push_back(v);
+      if (f.localized && f.surface_pose) offsets.push_back(OffsetAt(f.room_from_camera * f.surface_pose->Inverse(), centre));
     }
     result_.surface_offset_frames = static_cast<int>(offsets.size());
     if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3)) {
@@ -596,7 +595,7 @@ void SessionController::Run() {
   result_.mesh_vertices = static_cast<int>(mesh.mesh.vertices.size());
   result_.times.mesh_s = SecondsSince(t0);
 
-  // 4. Alignment.
+  // 6. Alignment.
   Step("aligning the reference model", 0.8);
   t0 = Clock::now();
   const PointCloud model_dense = SampleMeshSurface(model, 0.002);

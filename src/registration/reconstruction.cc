@@ -191,9 +191,7 @@ ReconstructionFrameReport ReconstructionBuilder::AddFrame(const PointCloud& clou
   report.world_from_camera = world_from_camera;
 
   if (options_.refine_poses && !voxels_.empty() && cloud.size() >= 10) {
-    target_.reset();
     Refine(cloud, world_from_camera, report.voxel_m, &report);
-    target_.reset();  // the reconstruction changes below
   }
   report.correction = report.world_from_camera * world_from_camera.Inverse();
   const bool refinement_refused = options_.refine_poses && !voxels_.empty() && !report.refined;
@@ -204,6 +202,7 @@ ReconstructionFrameReport ReconstructionBuilder::AddFrame(const PointCloud& clou
   }
   report.fused = true;
   ++frames_fused_;
+  target_.reset();  // the voxels change below: a prepared target is stale
 
   // Fusion: running centroids in output voxels.
   const Eigen::Matrix3d r = report.world_from_camera.RotationMatrix();

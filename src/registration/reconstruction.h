@@ -98,7 +98,7 @@ class ReconstructionBuilder {
   /// `world_from_camera` is the GICP-corrected pose (else the given one and
   /// `message` says why). For posing frames after the fact, e.g. the
   /// body-scan frames that see stickers. The prepared target is cached until
-  /// the next AddFrame.
+  /// a frame is fused.
   ReconstructionFrameReport RegisterFrame(const PointCloud& cloud_in_camera, const Rigid3d& world_from_camera);
 
   /// The fused cloud (world frame): one centroid per occupied output voxel
@@ -127,7 +127,7 @@ class ReconstructionBuilder {
   void Refine(const PointCloud& cloud, const Rigid3d& world_from_camera, double voxel_m,
               ReconstructionFrameReport* report);
   struct Target;
-  std::shared_ptr<Target> target_;  ///< prepared target (RegisterFrame), reset by AddFrame
+  std::shared_ptr<Target> target_;  ///< prepared target at target_->voxel_m, reset when a frame is fused
 
   ReconstructionOptions options_;
   std::unordered_map<uint64_t, Voxel> voxels_;
