@@ -16,7 +16,9 @@
 ///   marker, negative residual, lost frame with a pose, ...) is refused with
 ///   StoreError or arpos::Error and nothing is written.
 /// - Store-level failures (disk full, file locked past the busy timeout, a
-///   corrupt blob) throw arpos::Error subclasses; nothing aborts.
+///   corrupt blob) throw arpos::Error subclasses; nothing aborts. Those of
+///   the file itself (see StoreAccessError) say so in words a person can act
+///   on, with no SQL and no source line.
 ///
 /// Thread-safety: a Database object is not thread-safe; use one per thread.
 /// Several Database objects (threads or processes) may open the same file.
@@ -45,6 +47,17 @@ class StoreError : public Error {
 
  private:
   int sqlite_code_;
+};
+
+/// A problem with the store file or its folder rather than with the program:
+/// locked by another program past the busy timeout, read-only file, folder not
+/// writable, not an SQLite database, damaged file, disk full, I/O error.
+/// what() names the file or folder, quotes SQLite and says what to do; nothing
+/// of the failed step was written. The command-line tools report it as a
+/// store error (exit status 2), never as an internal error.
+class StoreAccessError : public StoreError {
+ public:
+  using StoreError::StoreError;
 };
 
 /// A snapshot of a store for summaries (see describe.h).

@@ -91,6 +91,13 @@ int MigrateSchema(sqlite3* db, const std::string& path, int target_version) {
       }
       ExecSql(db, "PRAGMA user_version = " + std::to_string(migration.version));
       transaction.Commit();
+    } catch (const StoreAccessError& e) {
+      // A problem of the file (read-only, locked, disk full): say that, not
+      // that the migration is broken.
+      throw StoreAccessError(std::string(e.what()) + " (while migrating the store from schema version " +
+                                 std::to_string(version) + " to " + std::to_string(migration.version) +
+                                 "; rolled back)",
+                             e.sqlite_code());
     } catch (const std::exception& e) {
       std::ostringstream out;
       out << path << ": migration " << migration.file_name << " (schema version " << version

@@ -2,7 +2,11 @@
 
 #include <sqlite3.h>
 
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 
 #include "store/blob_codec.h"
@@ -36,6 +40,34 @@ template <typename Id>
 std::optional<Id> OptionalId(const SqliteStatement& s, int column) {
   if (s.ColumnIsNull(column)) return std::nullopt;
   return Id(s.ColumnInt64(column));
+}
+
+// Finds before SQLite does what it would report as "unable to open database
+// file" or, at the first write, "attempt to write a readonly database": a
+// missing or unwritable folder (a file store keeps PATH-wal and PATH-shm
+// beside it), an unreadable or read-only file. Root passes the permission
+// checks, as it passes SQLite's; a read-only file system stops root too.
+void CheckStoreLocation(const std::string& path, bool exists) {
+  fs::path folder = fs::path(path).parent_path();
+  if (folder.empty()) folder = ".";
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) {
+    ARPOS_INPUT_ERROR(path << ": the folder " << folder.string()
+                           << " does not exist; create it or give --store a file in an existing folder");
+  }
+  auto refuse = [&](int code) {
+    const std::string problem = StoreAccessProblem(code, path, std::strerror(errno), "file system");
+    throw StoreAccessError(problem, code);
+  };
+  if (exists) {
+    if (::access(path.c_str(), R_OK) != 0) {
+      throw StoreAccessError(path + ": cannot read the store file (file system: \"" + std::strerror(errno) +
+                                 "\"); give the program read and write access to it, or give --store another file.",
+                             SQLITE_PERM);
+    }
+    if (::access(path.c_str(), W_OK) != 0) refuse(SQLITE_READONLY);
+  }
+  if (::access(folder.c_str(), W_OK | X_OK) != 0) refuse(SQLITE_READONLY_DIRECTORY);
 }
 
 struct SqliteCloser {
@@ -124,6 +156,7 @@ std::unique_ptr<SqliteDatabase> SqliteDatabase::Open(const std::string& path,
       ARPOS_INPUT_ERROR("no store at " << path);
     }
     if (fs::is_directory(status)) ARPOS_INPUT_ERROR(path << ": is a folder, not a store file");
+    CheckStoreLocation(path, fs::exists(status));
   }
 
   sqlite3* raw = nullptr;
@@ -133,6 +166,11 @@ std::unique_ptr<SqliteDatabase> SqliteDatabase::Open(const std::string& path,
   if (rc != SQLITE_OK) {
     ARPOS_INPUT_ERROR(path << ": cannot open store: "
                            << (raw != nullptr ? sqlite3_errmsg(raw) : sqlite3_errstr(rc)));
+  }
+  if (!in_memory && sqlite3_db_readonly(raw, "main") == 1) {
+    // SQLite fell back to reading only (a read-only mount, say): every write
+    // would fail later, after the work it was to store.
+    throw StoreAccessError(StoreAccessProblem(SQLITE_READONLY, path, "opened read-only"), SQLITE_READONLY);
   }
   ARPOS_SQLITE_CHECK(raw, sqlite3_extended_result_codes(raw, 1), "sqlite3_extended_result_codes");
   ARPOS_SQLITE_CHECK(raw, sqlite3_busy_timeout(raw, options.busy_timeout_ms),

@@ -9,7 +9,11 @@
 /// - newer schema than this program knows: refused with arpos::InputError
 ///   naming the file and both versions; the file is not changed;
 /// - older schema: migrated (migrator.h), one transaction per migration;
-/// - an SQLite file that is not an ARPos store: refused with InputError.
+/// - an SQLite file that is not an ARPos store: refused with InputError;
+/// - a file that is not an SQLite database, a read-only or unreadable file, a
+///   folder that is not writable: refused with StoreAccessError naming the
+///   file or folder and what to do, before anything is written (a missing
+///   folder: InputError).
 ///
 /// Thread-safety: one SqliteDatabase per thread. Any number of connections,
 /// in this or other processes, may open the same file; writers are serialised
@@ -31,8 +35,11 @@ struct SqliteOpenOptions {
   /// If false, a missing file is an InputError ("no store at PATH") instead of
   /// creating an empty store. Ignored for ":memory:".
   bool create_if_missing = true;
-  /// How long a write waits for another connection's lock before failing.
-  int busy_timeout_ms = 10000;
+  /// How long a write waits for another connection's lock. A transaction
+  /// (WithTransaction) says after a second that it is waiting, waits this
+  /// long, then tries once more for as long (sqlite_util.h) before it fails
+  /// with StoreAccessError: finished work is not dropped for a short lock.
+  int busy_timeout_ms = 60000;
 
   bool Check() const { return busy_timeout_ms >= 0; }
 };

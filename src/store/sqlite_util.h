@@ -3,7 +3,8 @@
 ///
 /// Every sqlite3 call that returns a result code goes through
 /// ARPOS_SQLITE_CHECK, which throws StoreError naming the database file, the
-/// SQL statement and SQLite's message. Statements are prepared once and reused;
+/// SQL statement and SQLite's message (StoreAccessError, without the SQL, for
+/// problems of the file: locked, read-only, ...). Statements are prepared once and reused;
 /// a SqliteStatementGuard resets a statement (and clears its bindings) when
 /// the scope that used it ends, even by exception, so no statement keeps a read
 /// transaction open. SqliteTransaction is a scoped transaction that rolls back
@@ -24,8 +25,17 @@ struct sqlite3;
 struct sqlite3_stmt;
 
 namespace arpos {
+/// For an SQLite result code that is a problem of the store file or its
+/// folder (locked, read-only, not a database, damaged, disk full, ...), the
+/// message of a StoreAccessError about `store`: what is wrong, the words of
+/// `source` (SQLite, or the file system for checks made before SQLite opens
+/// the file), what to do. Empty for other codes (program errors).
+std::string StoreAccessProblem(int extended_code, const std::string& store,
+                               const std::string& message, const std::string& source = "SQLite");
+
 namespace internal {
-/// Throws StoreError for result code `rc` of a call on `db` (may be null).
+/// Throws StoreAccessError for problems of the file (StoreAccessProblem),
+/// else StoreError for result code `rc` of a call on `db` (may be null).
 [[noreturn]] void ThrowSqliteError(sqlite3* db, int rc, std::string_view sql, const char* file,
                                    int line);
 /// True for SQLITE_OK, SQLITE_ROW and SQLITE_DONE.
@@ -116,7 +126,12 @@ class SqliteStatementGuard {
 /// Scoped transaction. The outermost one is BEGIN IMMEDIATE (takes the write
 /// lock up front, so it waits on the busy timeout instead of failing half-way
 /// through); nested ones are savepoints. Rolls back in the destructor unless
-/// Commit() succeeded.
+/// Commit() succeeded. Taking the lock and committing wait for another
+/// connection's lock: a wait past one second is logged as a warning ("the
+/// store is locked by another program; waiting up to N s"), the whole busy
+/// timeout is waited and then the step is tried once more for another busy
+/// timeout; after that StoreAccessError ("database is locked by another
+/// program") and nothing is written.
 class SqliteTransaction {
  public:
   explicit SqliteTransaction(sqlite3* db);
