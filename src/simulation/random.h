@@ -88,6 +88,11 @@ enum class Stream : uint64_t {
   kColorNoise = 8,
   kDepthNoise = 9,
   kHard = 10,
+  kConditions = 11,      ///< --random-conditions: what is drawn per seed
+  kConditionWalk = 12,   ///< --random-conditions: the room walk's origin-marker views
+  kExposure = 13,        ///< auto exposure
+  kDepthBias = 14,       ///< the depth error field
+  kBreathing = 15,       ///< breathing period and phase
 };
 
 inline uint64_t StreamSeed(uint64_t seed, Stream stream) {

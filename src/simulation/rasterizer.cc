@@ -73,9 +73,11 @@ RenderOutput Render(const RenderScene& scene, const std::vector<RenderInstance>&
   std::vector<RasterTri> tris;
   for (size_t inst = 0; inst < instances.size(); ++inst) {
     const RenderInstance& instance = instances[inst];
-    ARPOS_CHECK(instance.mesh >= 0 && instance.mesh < static_cast<int>(scene.meshes.size()),
+    ARPOS_CHECK(instance.mesh_override != nullptr ||
+                    (instance.mesh >= 0 && instance.mesh < static_cast<int>(scene.meshes.size())),
                 "bad mesh index " << instance.mesh);
-    const RenderMesh& mesh = scene.meshes[instance.mesh];
+    const RenderMesh& mesh =
+        instance.mesh_override != nullptr ? *instance.mesh_override : scene.meshes[instance.mesh];
     ARPOS_CHECK(mesh.material >= 0 && mesh.material < static_cast<int>(scene.materials.size()),
                 "mesh " << mesh.name << " has bad material");
     PreparedInstance pi;

@@ -34,6 +34,9 @@ struct RenderInstance {
   int mesh = -1;              ///< index into RenderScene::meshes
   Rigid3d camera_from_part;   ///< maps the mesh's part frame into the camera frame
   int label = 0;              ///< written to RenderOutput::label where visible (> 0)
+  /// Drawn instead of scene.meshes[mesh] if set (a per-frame deformed copy,
+  /// e.g. a breathing body); must outlive Render().
+  const RenderMesh* mesh_override = nullptr;
 };
 
 struct RenderOptions {

@@ -108,7 +108,7 @@ SensorProfile MakeSensorProfile(const std::string& name) {
 }
 
 cv::Mat SimulateColor(const cv::Mat& radiance, const SensorProfile& profile, bool noise,
-                      uint64_t frame_key) {
+                      uint64_t frame_key, const ColorEncoding& encoding) {
   ARPOS_CHECK(radiance.type() == CV_32FC3, "radiance must be CV_32FC3");
   cv::Mat lin = radiance;
   if (noise && profile.blur_sigma_px > 0) {
@@ -120,12 +120,16 @@ cv::Mat SimulateColor(const cv::Mat& radiance, const SensorProfile& profile, boo
   const double r2max = cx * cx + cy * cy;
   cv::Mat out(H, W, CV_8UC3);
   const uint64_t key = HashCombine(frame_key, 0xC0102ULL);
+  // The default (sRGB, no exposure change) keeps its original arithmetic.
+  const bool srgb = encoding.response == CameraResponse::kSrgb;
+  const double exposure_gain = encoding.exposure_stops != 0 ? std::exp2(encoding.exposure_stops) : 1.0;
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y) {
     const cv::Vec3f* in = lin.ptr<cv::Vec3f>(y);
     cv::Vec3b* o = out.ptr<cv::Vec3b>(y);
     for (int x = 0; x < W; ++x) {
       double gain = profile.exposure;
+      if (encoding.exposure_stops != 0) gain *= exposure_gain;
       if (noise) {
         const double r2 = ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / r2max;
         gain *= 1.0 - profile.vignetting * r2;
@@ -139,15 +143,51 @@ cv::Mat SimulateColor(const cv::Mat& radiance, const SensorProfile& profile, boo
                                             static_cast<uint64_t>(c)));
         }
         // RGB -> BGR.
-        o[x][2 - c] = Srgb8FromLinearFast(static_cast<float>(v / 255.0));
+        o[x][2 - c] = srgb ? Srgb8FromLinearFast(static_cast<float>(v / 255.0))
+                           : Encode8Fast(encoding.response, static_cast<float>(v / 255.0));
       }
     }
   }
   return out;
 }
 
+cv::Mat MakeDepthErrorField(int width, int height, uint64_t seed) {
+  Rng rng(seed);
+  // Weights of the radial term and three plane waves, |w| summing to 1.
+  double w[4];
+  double total = 0;
+  for (double& v : w) {
+    v = rng.Uniform(0.3, 1.0) * (rng.Uniform() < 0.5 ? -1 : 1);
+    total += std::abs(v);
+  }
+  for (double& v : w) v /= total;
+  double kx[3], ky[3], phase[3];
+  for (int i = 0; i < 3; ++i) {
+    kx[i] = rng.Uniform(-1.5, 1.5);
+    ky[i] = rng.Uniform(-1.5, 1.5);
+    phase[i] = rng.Uniform(0, 2 * M_PI);
+  }
+  const double cx = 0.5 * (width - 1), cy = 0.5 * (height - 1);
+  const double r2max = cx * cx + cy * cy;
+  cv::Mat field(height, width, CV_32F);
+  for (int y = 0; y < height; ++y) {
+    float* row = field.ptr<float>(y);
+    for (int x = 0; x < width; ++x) {
+      const double u = static_cast<double>(x) / width, v = static_cast<double>(y) / height;
+      const double r2 = ((x - cx) * (x - cx) + (y - cy) * (y - cy)) / r2max;
+      double f = w[0] * (2 * r2 - 1);
+      for (int i = 0; i < 3; ++i) f += w[i + 1] * std::cos(2 * M_PI * (kx[i] * u + ky[i] * v) + phase[i]);
+      row[x] = static_cast<float>(f);
+    }
+  }
+  return field;
+}
+
 cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, bool noise,
-                      uint64_t frame_key) {
+                      uint64_t frame_key, const DepthBias& bias) {
+  ARPOS_CHECK(bias.field_mm_at_1m == 0 ||
+                  (bias.field.type() == CV_32F && bias.field.size() == render.depth.size()),
+              "depth bias: the error field must be CV_32F of the image size");
   const cv::Mat& z = render.depth;
   const int W = z.cols, H = z.rows;
   const CameraIntrinsics& K = profile.intrinsics;
@@ -224,7 +264,25 @@ cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, 
           const float zn = z.at<float>(yy, xx);
           if (zn <= 0 || std::abs(zn - d) > profile.edge_relative_jump * d) edge = true;
         }
-        if (edge && PixelUniform(HashCombine(key, 3), x, y) < profile.edge_dropout) continue;
+        bool flying = false;
+        if (edge && bias.flying_pixels) {
+          // ... or some report a depth between the two surfaces.
+          double far = 0;
+          for (int k = 0; k < 4; ++k) {
+            const int xx = x + dx[k], yy = y + dy[k];
+            if (xx < 0 || yy < 0 || xx >= W || yy >= H) continue;
+            const float zn = z.at<float>(yy, xx);
+            if (zn > 0 && std::abs(zn - d) > profile.edge_relative_jump * d &&
+                std::abs(zn - d) > std::abs(far - d)) {
+              far = zn;
+            }
+          }
+          if (far > 0 && PixelUniform(HashCombine(key, 5), x, y) < 0.5) {
+            d += (0.15 + 0.7 * PixelUniform(HashCombine(key, 6), x, y)) * (far - d);
+            flying = true;
+          }
+        }
+        if (edge && !flying && PixelUniform(HashCombine(key, 3), x, y) < profile.edge_dropout) continue;
         const double sigma = profile.depth_sigma_const_m + profile.depth_sigma_quad_per_m * d * d;
         double n = white * PixelNormal(HashCombine(key, 4), x, y);
         if (!smooth.empty()) n += a * smooth.at<float>(y, x);
@@ -233,6 +291,12 @@ cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, 
           const double fbq = K.fx * profile.projector_baseline_m * profile.disparity_subpixel;
           d = fbq / std::max(1.0, std::round(fbq / d));
         }
+      }
+      if (bias.scale_error != 0 || bias.field_mm_at_1m != 0) {
+        // The sensor's own calibration turns its measurement into depth.
+        double biased = d * (1.0 + bias.scale_error);
+        if (bias.field_mm_at_1m != 0) biased += 0.001 * bias.field_mm_at_1m * d * d * bias.field.at<float>(y, x);
+        d = biased;
       }
       const double units = std::round(d * K.depth_scale);
       if (units <= 0 || units > 65535) continue;

@@ -3,12 +3,15 @@
 /// images an RGB-D camera delivers.
 ///
 /// Colour: linear radiance -> (optional motion blur) -> optical blur
-/// (Gaussian) -> exposure and vignetting -> shot + read noise in linear units
-/// -> sRGB gamma -> 8-bit BGR.
+/// (Gaussian) -> exposure (x 2^stops with auto exposure) and vignetting ->
+/// shot + read noise in linear units -> camera response (sRGB unless another
+/// is asked for, camera_response.h), clipped -> 8-bit BGR.
 /// Depth (registered to colour): exact centre-sample z -> noise growing with
 /// distance (white + spatially correlated) -> dropouts (random, grazing
 /// angles, depth discontinuities, projector shadows for structured light,
-/// range limits) -> quantisation to the depth scale.
+/// range limits) or, with flying pixels, a mix of the two depths at some
+/// discontinuities -> disparity steps -> optional calibration bias (scale
+/// error, smooth error field) -> quantisation to the depth scale.
 ///
 /// Randomness is a pure function of (seed, frame key, pixel): see random.h.
 
@@ -18,6 +21,7 @@
 #include <string>
 
 #include "sensor/intrinsics.h"
+#include "simulation/camera_response.h"
 #include "simulation/rasterizer.h"
 
 namespace arpos::sim {
@@ -57,17 +61,47 @@ struct SensorProfile {
 /// InputError for another name.
 SensorProfile MakeSensorProfile(const std::string& name);
 
-/// Linear radiance (CV_32FC3 RGB) -> 8-bit BGR as the camera delivers it.
-/// With `noise` false: no blur, no noise, no vignetting (exact render,
-/// gamma-encoded). `frame_key` identifies the frame for the noise.
+/// How the colour camera encodes one frame (defaults: sRGB, the profile's
+/// exposure).
+struct ColorEncoding {
+  CameraResponse response = CameraResponse::kSrgb;
+  double exposure_stops = 0;  ///< this frame's exposure relative to the profile's
+};
+
+/// Linear radiance (CV_32FC3 RGB) -> 8-bit BGR as the camera delivers it:
+/// code = round(255 response(clip(radiance x exposure x 2^stops x
+/// vignetting + noise))). With `noise` false: no blur, no noise, no
+/// vignetting (exact render, encoded by the response). `frame_key`
+/// identifies the frame for the noise.
 cv::Mat SimulateColor(const cv::Mat& radiance, const SensorProfile& profile, bool noise,
-                      uint64_t frame_key);
+                      uint64_t frame_key, const ColorEncoding& encoding = {});
+
+/// Systematic depth errors of a miscalibrated sensor (all off by default).
+/// Reported depth z' = z (1 + scale_error) + field_mm_at_1m / 1000 (z / 1 m)^2
+/// F(u, v), with z the sensor's own (noisy, quantised) depth and F a smooth
+/// field in [-1, 1] over the image, fixed for the case (MakeDepthErrorField).
+/// Flying pixels: at a depth discontinuity (the edge test of the dropouts),
+/// half the edge pixels that have a surface behind them report a mixed depth
+/// z + u (z_neighbour - z), u uniform in [0.15, 0.85], instead of the dropout
+/// test (noise only).
+struct DepthBias {
+  double scale_error = 0;      ///< e.g. 0.003 = +0.3 %
+  double field_mm_at_1m = 0;   ///< amplitude of the smooth field at 1 m
+  cv::Mat field;               ///< CV_32F, image size, values in [-1, 1]; needed if field_mm_at_1m != 0
+  bool flying_pixels = false;
+  bool Any() const { return scale_error != 0 || field_mm_at_1m != 0 || flying_pixels; }
+};
+
+/// The smooth field F of DepthBias for a width x height image: a weighted
+/// sum of a radial term and three plane waves of at most 1.5 cycles across
+/// the image, weights summing to 1 in absolute value (so |F| <= 1).
+cv::Mat MakeDepthErrorField(int width, int height, uint64_t seed);
 
 /// Exact depth (CV_32F metres, 0 = none) and normals -> 16-bit depth PNG
-/// values. With `noise` false: only range limits and rounding to the depth
-/// scale.
+/// values. With `noise` false: only range limits, the bias (scale and field)
+/// and rounding to the depth scale.
 cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, bool noise,
-                      uint64_t frame_key);
+                      uint64_t frame_key, const DepthBias& bias = {});
 
 /// Motion blur along the actual image motion. For each pixel, the point seen
 /// at its centre (depth, label) moves rigidly with its object: `motion(label,

@@ -122,8 +122,11 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
       << "frames: {room: " << t.room_frames << ", body_scan: " << t.body_scan_frames
       << ", tracking: " << t.tracking_frames << ", tracking_sequences: " << t.tracking_sequences
       << "}\n"
-      << "room_frame: \"room marker 0 on the floor beside the couch foot: origin at its printed "
-         "centre, x/y along the floor, z up; floor surface at z = -0.0003\"\n"
+      << (t.origin_moved
+              ? "room_frame: \"room marker 0 (conditions: origin_surface): origin at its printed centre, "
+                "x right, y up, z out of its face\"\n"
+              : "room_frame: \"room marker 0 on the floor beside the couch foot: origin at its printed "
+                "centre, x/y along the floor, z up; floor surface at z = -0.0003\"\n")
       << "model_frame: \"reference model: patient LPS axes (x left, y posterior, z superior), "
          "origin at the isocentre\"\n"
       << "isocentre_in_room_m: " << Vec(t.isocentre_in_room_m) << "\n"
@@ -143,6 +146,13 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
         << "    frame_interval_s: " << Num(s.frame_interval_s) << "\n"
         << "    lighting: " << s.lighting << "\n"
         << "    patient: " << (s.patient ? "true" : "false") << "\n";
+    if (!s.exposure_stops.empty()) {
+      out << "    exposure_stops: [";
+      for (size_t i = 0; i < s.exposure_stops.size(); ++i) {
+        out << (i ? ", " : "") << StringPrintf("%.4f", s.exposure_stops[i]);
+      }
+      out << "]\n";
+    }
   }
   if (!t.hard) {
     out << "hard_effects: {}\n";
@@ -162,6 +172,43 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
           << ", sequence: " << t.sticker_off_sequence << ", frame: " << t.sticker_off_frame
           << ", timestamp_s: " << StringPrintf("%.6f", t.sticker_off_timestamp_s) << "}\n";
     }
+  }
+  if (t.response != "srgb" || t.auto_exposure) {
+    out << "camera_response:\n"
+        << "  response: " << t.response << "\n"
+        << "  auto_exposure: " << (t.auto_exposure ? "true" : "false") << "\n";
+    if (!t.exposure_waves.empty()) {
+      out << "  exposure_waves: [";
+      for (size_t i = 0; i < t.exposure_waves.size(); ++i) {
+        const auto& w = t.exposure_waves[i];
+        out << (i ? ", " : "") << "[" << Num(w[0]) << ", " << Num(w[1]) << ", " << Num(w[2]) << "]";
+      }
+      out << "]\n";
+    }
+  }
+  if (t.depth_scale_error != 0 || t.depth_field_mm_at_1m != 0 || t.flying_pixels) {
+    out << "depth_bias:\n"
+        << "  scale_error: " << Num(t.depth_scale_error) << "\n"
+        << "  field_mm_at_1m: " << Num(t.depth_field_mm_at_1m) << "\n"
+        << "  field_seed: " << t.depth_field_seed << "\n"
+        << "  flying_pixels: " << (t.flying_pixels ? "true" : "false") << "\n";
+  }
+  if (t.breathing_amplitude_mm > 0) {
+    out << "breathing:\n"
+        << "  amplitude_mm: " << Num(t.breathing_amplitude_mm) << "\n"
+        << "  period_s: " << Num(t.breathing_period_s) << "\n"
+        << "  phase_rad: " << Num(t.breathing_phase_rad) << "\n"
+        << "  sticker_weights: {";
+    for (size_t i = 0; i < t.sticker_breathing_weights.size(); ++i) {
+      out << (i ? ", " : "") << t.sticker_breathing_weights[i].first << ": "
+          << StringPrintf("%.3f", t.sticker_breathing_weights[i].second);
+    }
+    out << "}\n";
+  }
+  if (t.origin_moved) out << "world_from_room: " << Matrix(t.world_from_room) << "\n";
+  if (!t.conditions.empty()) {
+    out << "conditions:\n";
+    for (const auto& [key, value] : t.conditions) out << "  " << key << ": " << value << "\n";
   }
   WriteFileAtomic(path, out.str());
 }
@@ -215,6 +262,9 @@ SimulationTruth LoadSimulationTruth(const std::filesystem::path& path) {
         r.As<double>(r.Need(seqs[i], "frame_interval_s", where), where + "frame_interval_s");
     s.lighting = r.As<std::string>(r.Need(seqs[i], "lighting", where), where + "lighting");
     s.patient = r.As<bool>(r.Need(seqs[i], "patient", where), where + "patient");
+    if (const YAML::Node e = seqs[i]["exposure_stops"]) {
+      s.exposure_stops = r.As<std::vector<double>>(e, where + "exposure_stops");
+    }
     t.sequences.push_back(s);
   }
   const YAML::Node hard = r.Need(root, "hard_effects", "");
@@ -244,7 +294,64 @@ SimulationTruth LoadSimulationTruth(const std::filesystem::path& path) {
     t.sticker_off_frame = r.As<int>(r.Need(s, "frame", w), w + "frame");
     t.sticker_off_timestamp_s = r.As<double>(r.Need(s, "timestamp_s", w), w + "timestamp_s");
   }
+  if (const YAML::Node cr = root["camera_response"]) {
+    const std::string w = "camera_response.";
+    t.response = r.As<std::string>(r.Need(cr, "response", w), w + "response");
+    t.auto_exposure = r.As<bool>(r.Need(cr, "auto_exposure", w), w + "auto_exposure");
+    if (const YAML::Node waves = cr["exposure_waves"]) {
+      for (size_t i = 0; i < waves.size(); ++i) {
+        const auto v = r.As<std::vector<double>>(waves[i], w + "exposure_waves");
+        if (v.size() != 3) r.Fail(w + "exposure_waves", "expected [frequency_hz, phase_rad, weight_stops]");
+        t.exposure_waves.push_back({v[0], v[1], v[2]});
+      }
+    }
+  }
+  if (const YAML::Node db = root["depth_bias"]) {
+    const std::string w = "depth_bias.";
+    t.depth_scale_error = r.As<double>(r.Need(db, "scale_error", w), w + "scale_error");
+    t.depth_field_mm_at_1m = r.As<double>(r.Need(db, "field_mm_at_1m", w), w + "field_mm_at_1m");
+    t.depth_field_seed = r.As<uint64_t>(r.Need(db, "field_seed", w), w + "field_seed");
+    t.flying_pixels = r.As<bool>(r.Need(db, "flying_pixels", w), w + "flying_pixels");
+  }
+  if (const YAML::Node b = root["breathing"]) {
+    const std::string w = "breathing.";
+    t.breathing_amplitude_mm = r.As<double>(r.Need(b, "amplitude_mm", w), w + "amplitude_mm");
+    t.breathing_period_s = r.As<double>(r.Need(b, "period_s", w), w + "period_s");
+    t.breathing_phase_rad = r.As<double>(r.Need(b, "phase_rad", w), w + "phase_rad");
+    if (const YAML::Node sw = b["sticker_weights"]) {
+      for (const auto& kv : sw) {
+        t.sticker_breathing_weights.emplace_back(r.As<int>(kv.first, w + "sticker_weights"),
+                                                 r.As<double>(kv.second, w + "sticker_weights"));
+      }
+    }
+  }
+  if (const YAML::Node wr = root["world_from_room"]) {
+    t.origin_moved = true;
+    t.world_from_room = r.Pose(wr, "world_from_room");
+  }
+  if (const YAML::Node c = root["conditions"]) {
+    if (!c.IsMap()) r.Fail("conditions", "expected a mapping");
+    for (const auto& kv : c) {
+      const std::string key = r.As<std::string>(kv.first, "conditions");
+      std::string value;
+      if (kv.second.IsScalar()) {
+        value = kv.second.Scalar();
+      } else {
+        YAML::Emitter e;
+        e << YAML::Flow << kv.second;
+        value = e.c_str();
+      }
+      t.conditions.emplace_back(key, value);
+    }
+  }
   return t;
+}
+
+std::string SimulationTruth::Condition(const std::string& key) const {
+  for (const auto& [k, v] : conditions) {
+    if (k == key) return v;
+  }
+  return "";
 }
 
 }  // namespace arpos::sim

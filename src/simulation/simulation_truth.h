@@ -45,6 +45,7 @@
 ///     frame_interval_s: 0.0333333
 ///     lighting: planning         # planning | treatment
 ///     patient: false             # patient and couch-top motion present
+///     exposure_stops: [0.12, ...]  # per frame, only with auto exposure
 /// hard_effects:                  # present only with --hard (else `hard_effects: {}`)
 ///   motion_blur: {exposure_s: 0.02, taps: 9}   # every frame of every sequence
 ///   lighting_change: {from_sequence: body_scan}  # planning -> treatment lighting
@@ -52,6 +53,30 @@
 ///                   first_timestamp_s: ..., last_timestamp_s: ...}
 ///   sticker_falls_off: {marker_id: 137, sequence: tracking/seq_00, frame: 75,
 ///                       timestamp_s: ...}   # invisible from this frame on, in all later sequences
+/// # The blocks below are present only when in use (absent: the default).
+/// camera_response:               # colour camera (camera_response.h)
+///   response: linear             # srgb | linear | gamma2.6 | scurve
+///   auto_exposure: true
+///   exposure_waves: [[f_hz, phase_rad, weight_stops], ...]  # stops(t) = sum w sin(2 pi f t + phase), t = timestamp
+/// depth_bias:                    # z' = z (1 + scale_error) + field_mm_at_1m / 1000 z^2 F(u, v) (sensor_model.h)
+///   scale_error: 0.003
+///   field_mm_at_1m: 2.5
+///   field_seed: 1234             # F = MakeDepthErrorField(width, height, field_seed)
+///   flying_pixels: true
+/// breathing:                     # anterior torso (simulator.h); body_groundtruth is the rigid part
+///   amplitude_mm: 4.5            # peak to peak
+///   period_s: 3.8
+///   phase_rad: 1.1               # displacement = amplitude w(p) cos^4(pi t / period + phase)
+///   sticker_weights: {137: 0.98, 150: 0}   # w at each sticker's centre
+/// world_from_room: [16 numbers]  # only when the origin marker was moved (world = layout frame, world.h)
+/// conditions:                    # only with --random-conditions: what was drawn (flat, one per line)
+///   origin_placement: wall       # floor_near_couch | floor_far | wall
+///   origin_surface: wall_left
+///   origin_visibility: poor      # good | medium | poor (the drawn views)
+///   origin_visible_frames: 5     # room frames that see it (geometrically), of
+///   room_frames: 60
+///   origin_median_side_px: 34.5
+///   ...                          # room markers, room, walk, response, depth, breathing, forced
 /// ```
 
 #include <array>
@@ -79,6 +104,7 @@ struct SimulatedSequence {
   double frame_interval_s = 0;
   std::string lighting;
   bool patient = false;
+  std::vector<double> exposure_stops;  ///< per frame with auto exposure, else empty
 };
 
 struct SimulationTruth {
@@ -108,6 +134,25 @@ struct SimulationTruth {
   std::string sticker_off_sequence;
   int sticker_off_frame = -1;
   double sticker_off_timestamp_s = 0;
+  // Camera response (absent from the file: srgb, fixed exposure).
+  std::string response = "srgb";
+  bool auto_exposure = false;
+  std::vector<std::array<double, 3>> exposure_waves;  ///< frequency_hz, phase_rad, weight_stops
+  // Depth bias (absent: none).
+  double depth_scale_error = 0;
+  double depth_field_mm_at_1m = 0;
+  uint64_t depth_field_seed = 0;
+  bool flying_pixels = false;
+  // Breathing (absent: none).
+  double breathing_amplitude_mm = 0, breathing_period_s = 0, breathing_phase_rad = 0;
+  std::vector<std::pair<int, double>> sticker_breathing_weights;  ///< marker id, weight
+  // A moved origin marker (absent: the world frame is the room frame).
+  bool origin_moved = false;
+  Rigid3d world_from_room;
+  // Drawn scene conditions, key -> value as written (absent: none).
+  std::vector<std::pair<std::string, std::string>> conditions;
+  /// The value of a condition, or "" if absent.
+  std::string Condition(const std::string& key) const;
 };
 
 /// Writes the format above atomically.

@@ -97,6 +97,17 @@ std::string SimulationOptions::Check() const {
   if (supersampling != 0 && supersampling != 1 && supersampling != 3 && supersampling != 5) {
     return "supersampling: must be 1, 3 or 5 (or 0 for the profile's)";
   }
+  CameraResponse r;
+  if (response && !ParseResponse(*response, &r)) {
+    return "response: must be srgb, linear, gamma2.6 or scurve, got " + *response;
+  }
+  if (depth_scale_error && !(std::abs(*depth_scale_error) <= 0.1)) {
+    return "depth-scale-error: must be within +-0.1 (10 %)";
+  }
+  if (depth_field_mm && !(*depth_field_mm >= 0 && *depth_field_mm <= 50)) {
+    return "depth-field-mm: must be 0..50";
+  }
+  if (breathing_mm && !(*breathing_mm >= 0 && *breathing_mm <= 30)) return "breathing-mm: must be 0..30";
   return "";
 }
 
@@ -114,7 +125,62 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   wo.seed = options_.seed;
   wo.body_mesh_path =
       options_.body_mesh_path.empty() ? DefaultBodyMeshPath() : options_.body_mesh_path;
+  random_conditions_ = options_.random_conditions;
+  SceneConditions& c = conditions_;
+  if (random_conditions_) {
+    c = DrawSceneConditions(options_.seed);
+    wo.layout = c.layout;
+    wo.world_from_origin_marker = c.world_from_origin_marker;
+    wo.origin_surface = c.origin_surface;
+    wo.room_marker_places = c.room_marker_places;
+    wo.room_marker_size_m = c.room_marker_size_m;
+  }
+  // Forced conditions replace the drawn (or default) ones.
+  if (options_.response) {
+    ParseResponse(*options_.response, &c.response);
+    forced_.push_back("response");
+  }
+  if (options_.auto_exposure) {
+    c.auto_exposure = *options_.auto_exposure;
+    forced_.push_back("auto_exposure");
+  }
+  if (options_.depth_scale_error) {
+    c.depth_scale_error = *options_.depth_scale_error;
+    forced_.push_back("depth_scale_error");
+  }
+  if (options_.depth_field_mm) {
+    c.depth_field_mm = *options_.depth_field_mm;
+    forced_.push_back("depth_field_mm");
+  }
+  if (options_.flying_pixels) {
+    c.flying_pixels = *options_.flying_pixels;
+    forced_.push_back("flying_pixels");
+  }
+  if (options_.breathing_mm) {
+    c.breathing_mm = *options_.breathing_mm;
+    forced_.push_back("breathing_mm");
+  }
   world_ = BuildWorld(wo);
+
+  response_ = c.response;
+  if (c.auto_exposure) auto_exposure_ = AutoExposure::Draw(StreamSeed(options_.seed, Stream::kExposure));
+  depth_bias_.scale_error = c.depth_scale_error;
+  depth_bias_.field_mm_at_1m = c.depth_field_mm;
+  depth_bias_.flying_pixels = c.flying_pixels;
+  if (c.depth_field_mm != 0) {
+    depth_field_seed_ = StreamSeed(options_.seed, Stream::kDepthBias);
+    depth_bias_.field =
+        MakeDepthErrorField(profile_.intrinsics.width, profile_.intrinsics.height, depth_field_seed_);
+  }
+  if (c.breathing_mm > 0) {
+    Rng breathing_rng(StreamSeed(options_.seed, Stream::kBreathing));
+    breathing_m_ = 0.001 * c.breathing_mm;
+    breathing_period_s_ = breathing_rng.Uniform(3.0, 5.0);
+    breathing_phase_rad_ = breathing_rng.Uniform(0, M_PI);
+    for (const auto& m : world_.body_markers) {
+      sticker_breathing_weight_.push_back(world_.BreathingWeight(m.parent_from_marker.translation));
+    }
+  }
 
   Rng rng(StreamSeed(options_.seed, Stream::kTrajectory));
   Rng body_rng(StreamSeed(options_.seed, Stream::kBodyMotion));
@@ -129,30 +195,40 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
     s.kind = SequenceKind::kRoom;
     s.frames = options_.room_frames;
     s.first_timestamp_s = 10.0;
-    s.frame_interval_s = FrameInterval(s.frames, kRoomDurationS);
+    s.frame_interval_s =
+        FrameInterval(s.frames, random_conditions_ ? c.room_duration_s : kRoomDurationS);
+    const RoomLayout& lay = world_.layout;
     std::vector<CameraKey> keys = {
         {V3(-0.35, -0.6, 1.35), V3(0.15, 0.4, 0.0)},   // marker 0 and the couch foot
         {V3(-0.75, 0.2, 1.5), V3(0.6, 1.0, 0.4)},
         {V3(-0.9, 1.2, 1.6), V3(0.8, 1.4, 0.5)},
         {V3(-0.8, 2.4, 1.55), V3(0.6, 2.2, 0.4)},
-        {V3(-0.6, 1.5, 1.5), V3(-1.9, 0.9, 1.2)},      // left wall
-        {V3(-0.3, -0.9, 1.5), V3(0.8, -1.7, 1.1)},     // foot wall
+        {V3(-0.6, 1.5, 1.5), V3(lay.wall_left_x_m, 0.9, 1.2)},    // left wall
+        {V3(-0.3, -0.9, 1.5), V3(0.8, lay.wall_foot_y_m, 1.1)},   // foot wall
         {V3(cx, -1.0, 1.6), V3(cx, 1.0, 0.6)},          // along the couch from its foot
         {V3(1.9, -0.4, 1.5), V3(0.9, 0.8, 0.3)},
         {V3(2.3, 0.8, 1.6), V3(0.8, 1.3, 0.5)},
         {V3(2.3, 2.2, 1.55), V3(0.9, 1.8, 0.5)},
-        {V3(2.0, 1.2, 1.5), V3(3.4, 1.5, 1.3)},        // right wall
+        {V3(2.0, 1.2, 1.5), V3(lay.wall_right_x_m, 1.5, 1.3)},    // right wall
         {V3(1.7, 3.0, 1.6), V3(cx, 2.0, 0.6)},          // head end, gantry in view
         {V3(1.3, 0.1, 1.45), V3(0.0, 0.5, 0.0)},       // floor markers across the couch
         {V3(0.2, -0.7, 1.3), V3(0.0, 0.1, 0.0)},       // back to marker 0
     };
-    if (options_.room_walk == "couch") {
+    if ((random_conditions_ ? c.room_walk : options_.room_walk) == "couch") {
       // Around the couch: foot, left side, head end, right side, across, back.
       keys = {keys[0], keys[1], keys[2], keys[3], keys[11], keys[9], keys[8], keys[7], keys[12], keys[13]};
     }
-    keys = Jitter(keys, &rng, 0.08, 0.1);
-    const double duration = std::max(1.0 / kFps, (s.frames - 1) * s.frame_interval_s);
-    s.camera = HandheldTrajectory(keys, duration, rng.Bits());
+    if (random_conditions_) {
+      // The first and last keys look at the standard origin place; the
+      // drawn origin marker gets views of its own.
+      keys = std::vector<CameraKey>(keys.begin() + 1, keys.end() - 1);
+      keys = Jitter(keys, &rng, c.path_jitter_m, 1.25 * c.path_jitter_m);
+      PlanRandomRoomWalk(keys, rng.Bits(), &s);
+    } else {
+      keys = Jitter(keys, &rng, 0.08, 0.1);
+      const double duration = std::max(1.0 / kFps, (s.frames - 1) * s.frame_interval_s);
+      s.camera = HandheldTrajectory(keys, duration, rng.Bits());
+    }
     s.patient = false;
     sequences_.push_back(std::move(s));
   }
@@ -164,7 +240,8 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
     s.kind = SequenceKind::kBodyScan;
     s.frames = options_.body_scan_frames;
     s.first_timestamp_s = 1000.0;
-    s.frame_interval_s = FrameInterval(s.frames, kBodyScanDurationS);
+    s.frame_interval_s =
+        FrameInterval(s.frames, random_conditions_ ? c.body_scan_duration_s : kBodyScanDurationS);
     const double z = top + 0.15;  // roughly the body's front surface
     // 0.6-0.9 m from the skin: stickers of 0.03 m span 20-28 px (xtion).
     // The recording starts and ends looking across the body at the floor
@@ -258,6 +335,221 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
     sticker_off_sequence_ = options_.tracking_sequences > 0 ? 2 : 1;
     sticker_off_frame_ = sequences_[sticker_off_sequence_].frames / 2;
   }
+  if (!random_conditions_) origin_visibility_ = MeasureOriginVisibility(sequences_.front());
+}
+
+double Simulator::ExposureStops(double timestamp_s) const {
+  return auto_exposure_.enabled() ? auto_exposure_.Stops(timestamp_s) : 0.0;
+}
+
+double Simulator::BreathingDisplacementM(double timestamp_s) const {
+  if (breathing_m_ <= 0) return 0;
+  const double c = std::cos(M_PI * timestamp_s / breathing_period_s_ + breathing_phase_rad_);
+  return breathing_m_ * c * c * c * c;
+}
+
+RenderMesh Simulator::BreathingBody(double breathing_m) const {
+  RenderMesh body = world_.scene.meshes[world_.body_mesh];
+  TriangleMesh surface;
+  surface.vertices = body.vertices;
+  surface.faces = body.faces;
+  for (size_t i = 0; i < surface.vertices.size(); ++i) {
+    // Anterior is the model's -y.
+    surface.vertices[i].y() -= static_cast<float>(breathing_m * world_.body_breathing_weight[i]);
+  }
+  surface.ComputeVertexNormals();
+  body.vertices = std::move(surface.vertices);
+  body.normals = std::move(surface.vertex_normals);
+  return body;
+}
+
+namespace {
+
+// Segment p -> q against an axis-aligned box (slabs).
+bool SegmentHitsBox(const V3& p, const V3& q, const V3& lo, const V3& hi) {
+  double t0 = 0, t1 = 1;
+  const V3 d = q - p;
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(d[a]) < 1e-12) {
+      if (p[a] < lo[a] || p[a] > hi[a]) return false;
+      continue;
+    }
+    double ta = (lo[a] - p[a]) / d[a], tb = (hi[a] - p[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+bool Simulator::OriginSeen(const Rigid3d& world_from_camera, double* side_px,
+                           double* angle_deg) const {
+  const MarkerTruth& origin = world_.room_markers.front();
+  const CameraIntrinsics& K = profile_.intrinsics;
+  const Rigid3d camera_from_world = world_from_camera.Inverse();
+  const V3 eye = world_from_camera.translation;
+  const V3 centre = origin.parent_from_marker.translation;
+  const V3 normal = origin.parent_from_marker.rotation * V3::UnitZ();
+  const V3 to_eye = eye - centre;
+  const double cosine = normal.dot(to_eye) / std::max(1e-9, to_eye.norm());
+  *angle_deg = DegFromRad(std::acos(std::clamp(cosine, -1.0, 1.0)));
+  if (*angle_deg > 75) return false;
+  Eigen::Vector2d px[4];
+  for (int k = 0; k < 4; ++k) {
+    const V3 p = camera_from_world * origin.corners_m[k];
+    if (p.z() < 0.1) return false;
+    px[k] = K.Project(p);
+    if (px[k].x() < 4 || px[k].y() < 4 || px[k].x() > K.width - 5 || px[k].y() > K.height - 5) return false;
+    // The last 2 cm before the marker cannot hide it (its own surface).
+    const V3 target = origin.corners_m[k] + 0.02 * (eye - origin.corners_m[k]).normalized();
+    for (const auto& [lo, hi] : world_.occluders) {
+      if (SegmentHitsBox(eye, target, lo, hi)) return false;
+    }
+  }
+  *side_px = 0;
+  for (int k = 0; k < 4; ++k) *side_px += 0.25 * (px[(k + 1) % 4] - px[k]).norm();
+  return true;
+}
+
+OriginVisibility Simulator::MeasureOriginVisibility(const SequencePlan& room) const {
+  OriginVisibility v;
+  v.frames = room.frames;
+  std::vector<double> sides, angles;
+  for (int f = 0; f < room.frames; ++f) {
+    double side = 0, angle = 0;
+    if (OriginSeen(room.camera.RoomFromCamera(room.time(f)), &side, &angle)) {
+      sides.push_back(side);
+      angles.push_back(angle);
+    }
+  }
+  v.visible_frames = static_cast<int>(sides.size());
+  if (!sides.empty()) {
+    std::sort(sides.begin(), sides.end());
+    std::sort(angles.begin(), angles.end());
+    v.median_side_px = sides[sides.size() / 2];
+    v.min_side_px = sides.front();
+    v.median_angle_deg = angles[angles.size() / 2];
+  }
+  return v;
+}
+
+std::vector<CameraKey> Simulator::OriginViewKeys(const std::string& visibility, Rng* rng) const {
+  const MarkerTruth& origin = world_.room_markers.front();
+  const V3 c = origin.parent_from_marker.translation;
+  const V3 n = origin.parent_from_marker.rotation * V3::UnitZ();
+  const CameraIntrinsics& K = profile_.intrinsics;
+  const RoomLayout& lay = world_.layout;
+  const bool on_floor = std::abs(n.z()) > 0.5;
+  // Every draw is made whatever the class (a fixed sequence per attempt).
+  const double theta_good = rng->Uniform(10, 35), theta_medium = rng->Uniform(35, 55);
+  const double theta_poor = rng->Uniform(50, 70);
+  const double d_good = rng->Uniform(1.2, 2.0), d_medium = rng->Uniform(1.6, 2.4);
+  const double px_poor = rng->Uniform(30, 40);
+  const double phi0 = RadFromDeg(rng->Uniform(-60, 60));
+  const double second_phi = RadFromDeg(rng->Uniform(40, 100)) * (rng->Uniform() < 0.5 ? -1 : 1);
+  const double side = rng->Uniform() < 0.5 ? -1.0 : 1.0;
+  const V3 look_jitter(rng->Uniform(-0.1, 0.1), rng->Uniform(-0.1, 0.1), rng->Uniform(-0.05, 0.05));
+  double theta = theta_good, d = d_good;
+  if (visibility == "medium") {
+    theta = theta_medium;
+    d = d_medium;
+  } else if (visibility == "poor") {
+    theta = theta_poor;
+    d = K.fx * origin.size_m / px_poor;
+  }
+  theta = RadFromDeg(theta);
+  // Azimuths measured from the direction towards the couch, in the
+  // marker's plane.
+  V3 towards = V3(kCouchCentreX_m, 1.2, 1.2) - c;
+  towards -= towards.dot(n) * n;
+  if (towards.norm() < 1e-6) towards = n.unitOrthogonal();
+  const V3 a0 = towards.normalized(), b0 = n.cross(a0);
+  auto inside = [&](const V3& p) {
+    if (p.x() < lay.wall_left_x_m + 0.35 || p.x() > lay.wall_right_x_m - 0.35) return false;
+    if (p.y() < lay.wall_foot_y_m + 0.35 || p.y() > lay.wall_head_y_m - 0.35) return false;
+    for (const auto& [lo, hi] : world_.occluders) {
+      if (p.x() > lo.x() - 0.25 && p.x() < hi.x() + 0.25 && p.y() > lo.y() - 0.25 &&
+          p.y() < hi.y() + 0.25 && p.z() < std::max(hi.z(), 1.9) + 0.1) {
+        return false;
+      }
+    }
+    return true;
+  };
+  auto place = [&](double phi, V3* eye) {
+    for (double scale : {1.0, 0.85, 0.7, 0.6}) {
+      for (int k = 0; k < 24; ++k) {
+        const double a = phi + (k % 2 ? 1 : -1) * ((k + 1) / 2) * RadFromDeg(15);
+        const V3 dir = std::cos(a) * a0 + std::sin(a) * b0;
+        V3 p = c + scale * d * (std::cos(theta) * n + std::sin(theta) * dir);
+        p.z() = std::clamp(p.z(), on_floor ? 1.0 : 1.1, 1.8);
+        if (inside(p)) {
+          *eye = p;
+          return true;
+        }
+      }
+    }
+    return false;
+  };
+  std::vector<CameraKey> keys;
+  V3 eye;
+  if (!place(phi0, &eye)) return keys;
+  V3 look = c + look_jitter;
+  if (visibility == "poor") {
+    // Off the image centre: the marker ~55 % of the way to the side edge.
+    V3 lateral = (c - eye).cross(V3::UnitZ());
+    if (lateral.norm() < 1e-6) lateral = V3::UnitX();
+    look = c + side * 0.55 * (c - eye).norm() * (K.width / 2.0) / K.fx * lateral.normalized();
+  }
+  keys.push_back({eye, look});
+  if (visibility == "good") {
+    // The walk ends on it too, from another side.
+    V3 eye2 = eye;
+    place(phi0 + second_phi, &eye2);
+    keys.push_back({eye2, c - look_jitter});
+  }
+  return keys;
+}
+
+void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t trajectory_seed,
+                                   SequencePlan* room) {
+  Rng walk_rng(StreamSeed(options_.seed, Stream::kConditionWalk));
+  const double duration = std::max(1.0 / kFps, (room->frames - 1) * room->frame_interval_s);
+  const int needed = std::min(3, room->frames);
+  std::string visibility = conditions_.origin_visibility;
+  // A drawn view that sees the marker too rarely (hidden, off the image) is
+  // drawn again; after 10 tries the walk falls back to good views.
+  for (int attempt = 0; attempt < 14; ++attempt) {
+    if (attempt == 10) visibility = "good";
+    const std::vector<CameraKey> views = OriginViewKeys(visibility, &walk_rng);
+    std::vector<CameraKey> all = keys;
+    if (views.size() == 2) {
+      all.insert(all.begin(), views[0]);
+      all.push_back(views[1]);
+    } else if (views.size() == 1) {
+      // Where it lengthens the walk least.
+      const V3 v = views[0].position_m;
+      size_t best = 0;
+      double best_cost = (v - all.front().position_m).norm();
+      for (size_t i = 1; i <= all.size(); ++i) {
+        const double cost = i == all.size()
+                                ? (all.back().position_m - v).norm()
+                                : (all[i - 1].position_m - v).norm() + (v - all[i].position_m).norm() -
+                                      (all[i - 1].position_m - all[i].position_m).norm();
+        if (cost < best_cost) {
+          best_cost = cost;
+          best = i;
+        }
+      }
+      all.insert(all.begin() + static_cast<std::ptrdiff_t>(best), views[0]);
+    }
+    room->camera = HandheldTrajectory(all, duration, trajectory_seed);
+    origin_visibility_ = MeasureOriginVisibility(*room);
+    if (origin_visibility_.visible_frames >= needed) break;
+  }
+  conditions_.origin_visibility = visibility;
 }
 
 bool Simulator::StickerOn(int marker_index, int sequence, int frame) const {
@@ -274,6 +566,8 @@ Simulator::Scene Simulator::SceneAt(int sequence, int frame, double dt_s) const 
   scene.room_from_camera = s.camera.RoomFromCamera(t);
   if (s.patient) scene.room_from_model = s.body.RoomFromModel(t);
   scene.lighting = s.treatment_lighting ? &world_.treatment_lighting : &world_.planning_lighting;
+  scene.exposure_stops = ExposureStops(s.first_timestamp_s + t);
+  if (s.patient) scene.breathing_m = BreathingDisplacementM(s.first_timestamp_s + t);
   scene.sticker_on.resize(world_.body_markers.size());
   for (size_t i = 0; i < world_.body_markers.size(); ++i) {
     scene.sticker_on[i] = StickerOn(static_cast<int>(i), sequence, frame);
@@ -301,12 +595,26 @@ SimulatedFrame Simulator::RenderScene(const Scene& scene, bool noise, uint64_t f
   for (int mesh : world_.couch_top_meshes) {
     instances.push_back({mesh, camera_from_couch, kLabelCouchTop});
   }
+  RenderMesh breathing_body;  // outlives Render()
   if (scene.room_from_model) {
     const Rigid3d camera_from_model = camera_from_room * *scene.room_from_model;
-    instances.push_back({world_.body_mesh, camera_from_model, kLabelBody});
+    RenderInstance body{world_.body_mesh, camera_from_model, kLabelBody};
+    if (scene.breathing_m > 0) {
+      breathing_body = BreathingBody(scene.breathing_m);
+      body.mesh_override = &breathing_body;
+    }
+    instances.push_back(body);
     for (size_t i = 0; i < world_.sticker_meshes.size(); ++i) {
       if (scene.sticker_on.empty() || scene.sticker_on[i]) {
-        instances.push_back({world_.sticker_meshes[i], camera_from_model, kLabelSticker});
+        Rigid3d camera_from_sticker_part = camera_from_model;
+        if (scene.breathing_m > 0) {
+          // A sticker rides on the skin under it.
+          camera_from_sticker_part =
+              camera_from_model *
+              Rigid3d(Eigen::Quaterniond::Identity(),
+                      V3(0, -scene.breathing_m * sticker_breathing_weight_[i], 0));
+        }
+        instances.push_back({world_.sticker_meshes[i], camera_from_sticker_part, kLabelSticker});
       }
     }
   }
@@ -338,8 +646,11 @@ SimulatedFrame Simulator::RenderScene(const Scene& scene, bool noise, uint64_t f
     radiance = ApplyMotionBlur(radiance, out.exact, profile_.intrinsics, profile_.exposure_time_s,
                                motion, kLabelHand, kBlurTaps);
   }
-  out.color = SimulateColor(radiance, profile_, noise, frame_key);
-  out.depth = SimulateDepth(out.exact, profile_, noise, frame_key);
+  ColorEncoding encoding;
+  encoding.response = response_;
+  encoding.exposure_stops = scene.exposure_stops;
+  out.color = SimulateColor(radiance, profile_, noise, frame_key, encoding);
+  out.depth = SimulateDepth(out.exact, profile_, noise, frame_key, depth_bias_);
   return out;
 }
 
@@ -354,17 +665,33 @@ SimulatedFrame Simulator::RenderFrame(int sequence, int frame) const {
                              static_cast<uint64_t>(frame));
   SimulatedFrame out = RenderScene(scene, options_.noise, key, &scene_at);
   out.timestamp_s = s.timestamp(frame);
-  return out;
+  return ToRoomFrame(std::move(out));
+}
+
+SimulatedFrame Simulator::ToRoomFrame(SimulatedFrame frame) const {
+  if (!world_.origin_moved) return frame;
+  frame.room_from_camera = world_.room_from_world * frame.room_from_camera;
+  if (frame.room_from_model) frame.room_from_model = world_.room_from_world * *frame.room_from_model;
+  return frame;
 }
 
 SimulatedFrame Simulator::RenderView(const Rigid3d& room_from_camera,
                                      const std::optional<Rigid3d>& room_from_model, bool noise,
-                                     uint64_t frame_key) const {
+                                     uint64_t frame_key, double breathing_fraction) const {
   Scene scene;
   scene.room_from_camera = room_from_camera;
   scene.room_from_model = room_from_model;
+  if (world_.origin_moved) {
+    const Rigid3d world_from_room = world_.room_from_world.Inverse();
+    scene.room_from_camera = world_from_room * room_from_camera;
+    if (room_from_model) scene.room_from_model = world_from_room * *room_from_model;
+  }
   scene.lighting = &world_.planning_lighting;
-  return RenderScene(scene, noise, Hash3(options_.seed, 0xF1E3ULL, frame_key), nullptr);
+  scene.breathing_m = std::clamp(breathing_fraction, 0.0, 1.0) * breathing_m_;
+  SimulatedFrame out = RenderScene(scene, noise, Hash3(options_.seed, 0xF1E3ULL, frame_key), nullptr);
+  out.room_from_camera = room_from_camera;
+  out.room_from_model = room_from_model;
+  return out;
 }
 
 SimulationTruth Simulator::Truth() const {
@@ -379,12 +706,21 @@ SimulationTruth Simulator::Truth() const {
   t.body_scan_frames = options_.body_scan_frames;
   t.tracking_frames = options_.tracking_frames;
   t.tracking_sequences = options_.tracking_sequences;
-  t.isocentre_in_room_m = world_.room_from_model_target.translation;
-  t.room_from_model_target = world_.room_from_model_target;
+  const Rigid3d& room_from_world = world_.room_from_world;
+  t.room_from_model_target = world_.origin_moved ? room_from_world * world_.room_from_model_target
+                                                 : world_.room_from_model_target;
+  t.isocentre_in_room_m = t.room_from_model_target.translation;
   t.reference_noise_sigma_m = WorldOptions().reference_noise_m;
   t.max_tessellation_difference_m = world_.max_tessellation_difference_m;
   t.couch_top_height_m = world_.couch_top_height_m;
-  for (const auto& m : world_.room_markers) t.room_markers.push_back(ToSimulated(m));
+  for (const auto& m : world_.room_markers) {
+    t.room_markers.push_back(ToSimulated(m));
+    if (world_.origin_moved) {
+      SimulatedMarker& room = t.room_markers.back();
+      room.parent_from_marker = room_from_world * room.parent_from_marker;
+      for (auto& corner : room.corners_m) corner = room_from_world * corner;
+    }
+  }
   for (const auto& m : world_.body_markers) t.body_markers.push_back(ToSimulated(m));
   for (const auto& s : sequences_) {
     SimulatedSequence q;
@@ -394,7 +730,63 @@ SimulationTruth Simulator::Truth() const {
     q.frame_interval_s = s.frame_interval_s;
     q.lighting = s.treatment_lighting ? "treatment" : "planning";
     q.patient = s.patient;
+    if (auto_exposure_.enabled()) {
+      for (int f = 0; f < s.frames; ++f) q.exposure_stops.push_back(ExposureStops(s.timestamp(f)));
+    }
     t.sequences.push_back(q);
+  }
+  t.response = ResponseName(response_);
+  t.auto_exposure = auto_exposure_.enabled();
+  for (const auto& w : auto_exposure_.waves) {
+    t.exposure_waves.push_back({w.frequency_hz, w.phase_rad, w.weight_stops});
+  }
+  t.depth_scale_error = depth_bias_.scale_error;
+  t.depth_field_mm_at_1m = depth_bias_.field_mm_at_1m;
+  t.depth_field_seed = depth_field_seed_;
+  t.flying_pixels = depth_bias_.flying_pixels;
+  if (breathing_m_ > 0) {
+    t.breathing_amplitude_mm = 1000 * breathing_m_;
+    t.breathing_period_s = breathing_period_s_;
+    t.breathing_phase_rad = breathing_phase_rad_;
+    for (size_t i = 0; i < world_.body_markers.size(); ++i) {
+      t.sticker_breathing_weights.emplace_back(world_.body_markers[i].id, sticker_breathing_weight_[i]);
+    }
+  }
+  t.origin_moved = world_.origin_moved;
+  if (world_.origin_moved) t.world_from_room = room_from_world.Inverse();
+  if (random_conditions_) {
+    const SceneConditions& c = conditions_;
+    const OriginVisibility& v = origin_visibility_;
+    auto add = [&](const std::string& key, const std::string& value) { t.conditions.emplace_back(key, value); };
+    auto num = [](double x, const char* format) { return StringPrintf(format, x); };
+    add("origin_placement", c.origin_placement);
+    add("origin_surface", c.origin_surface);
+    add("origin_visibility", c.origin_visibility);
+    add("origin_visible_frames", std::to_string(v.visible_frames));
+    add("room_frames", std::to_string(v.frames));
+    add("origin_median_side_px", num(v.median_side_px, "%.1f"));
+    add("origin_min_side_px", num(v.min_side_px, "%.1f"));
+    add("origin_median_view_angle_deg", num(v.median_angle_deg, "%.1f"));
+    add("room_marker_count", std::to_string(world_.room_markers.size() - 1));
+    add("room_marker_size_m", num(c.room_marker_size_m, "%.3f"));
+    add("wall_left_x_m", num(c.layout.wall_left_x_m, "%.3f"));
+    add("wall_right_x_m", num(c.layout.wall_right_x_m, "%.3f"));
+    add("wall_foot_y_m", num(c.layout.wall_foot_y_m, "%.3f"));
+    add("wall_head_y_m", num(c.layout.wall_head_y_m, "%.3f"));
+    add("ceiling_z_m", num(c.layout.ceiling_z_m, "%.3f"));
+    add("room_walk", c.room_walk);
+    add("room_duration_s", num(c.room_duration_s, "%.2f"));
+    add("body_scan_duration_s", num(c.body_scan_duration_s, "%.2f"));
+    add("path_jitter_m", num(c.path_jitter_m, "%.3f"));
+    add("response", ResponseName(c.response));
+    add("auto_exposure", c.auto_exposure ? "true" : "false");
+    add("depth_scale_error", num(c.depth_scale_error, "%.5f"));
+    add("depth_field_mm", num(c.depth_field_mm, "%.2f"));
+    add("flying_pixels", c.flying_pixels ? "true" : "false");
+    add("breathing_mm", num(c.breathing_mm, "%.2f"));
+    std::string forced = "[";
+    for (size_t i = 0; i < forced_.size(); ++i) forced += (i ? ", " : "") + forced_[i];
+    add("forced", forced + "]");
   }
   if (options_.hard) {
     t.motion_blur_exposure_s = profile_.exposure_time_s;
@@ -447,7 +839,10 @@ SimulationReport Simulator::WriteCase(const std::filesystem::path& out_dir,
   SaveTriangleMeshPly(world_.reference_model, out_dir / "reference_model.ply",
                       "ARPos simulated reference model: model frame (LPS, origin at the "
                       "isocentre), metres");
-  WriteMatrix4(out_dir / "target_pose.txt", world_.room_from_model_target.ToMatrix(),
+  const Rigid3d room_from_model_target = world_.origin_moved
+                                             ? world_.room_from_world * world_.room_from_model_target
+                                             : world_.room_from_model_target;
+  WriteMatrix4(out_dir / "target_pose.txt", room_from_model_target.ToMatrix(),
                "room_from_model: desired pose of the reference model in the room (row-major)");
 
   std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, options_.png_compression};

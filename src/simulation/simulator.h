@@ -15,6 +15,22 @@
 /// (room_from_model) for body_scan and tracking.
 ///
 /// Deterministic: the same options give byte-identical files (any thread count).
+///
+/// Beyond the default (an sRGB camera with fixed exposure, an unbiased depth
+/// sensor, a patient who does not breathe, one room layout), the options ask
+/// for other camera responses and auto exposure (camera_response.h), depth
+/// bias and flying pixels (sensor_model.h DepthBias), breathing (below), and
+/// scene conditions drawn per seed (conditions.h). None of them changes a
+/// byte of the default output; simulation.yaml records every one in use.
+///
+/// Breathing (breathing_mm = A > 0): the anterior torso (World::BreathingWeight
+/// w(p), model frame) moves along the model's -y (anterior) by
+/// A w(p) cos^4(pi t / T + phase), t the frame's timestamp, period T 3-5 s
+/// and phase drawn from the seed: 0 at end-exhale, which is what
+/// reference_model.ply shows (a long dwell there, as real breathing, Lujan
+/// et al. 1999), A at peak inhale. The back, head, arms and legs do not move,
+/// so body_groundtruth.txt (the rigid pose of the non-moving part) is
+/// unchanged; stickers ride on the skin (translated by A w(centre) ...).
 
 #include <cstdint>
 #include <filesystem>
@@ -24,6 +40,9 @@
 #include <vector>
 
 #include "geometry/rigid3.h"
+#include "simulation/camera_response.h"
+#include "simulation/conditions.h"
+#include "simulation/random.h"
 #include "simulation/rasterizer.h"
 #include "simulation/sensor_model.h"
 #include "simulation/simulation_truth.h"
@@ -53,8 +72,34 @@ struct SimulationOptions {
   std::filesystem::path body_mesh_path;
   int png_compression = 1;  ///< 0..9 (cv::IMWRITE_PNG_COMPRESSION); 1: fast, 3 % larger than 9
   int supersampling = 0;    ///< 0 = the profile's (3); else 1, 3 or 5
+  // Sensor and patient conditions. Unset: the default (sRGB, fixed
+  // exposure, no depth bias, no breathing), or drawn per seed with
+  // random_conditions; set: forced (also over the drawn value).
+  std::optional<std::string> response;      ///< srgb | linear | gamma2.6 | scurve
+  std::optional<bool> auto_exposure;        ///< exposure drifting by up to +-1 stop
+  std::optional<double> depth_scale_error;  ///< e.g. 0.003 = depth 0.3 % long
+  std::optional<double> depth_field_mm;     ///< smooth depth error field, amplitude at 1 m
+  std::optional<bool> flying_pixels;        ///< mixed depths at depth edges
+  std::optional<double> breathing_mm;       ///< anterior torso, peak to peak
+  /// Draw the scene conditions from the seed (conditions.h): origin marker
+  /// placement and visibility, room markers, room, camera paths and pace
+  /// (room_walk is then drawn too), and the sensor and patient conditions
+  /// above that are not set.
+  bool random_conditions = false;
   /// Empty if valid, else "option: problem".
   std::string Check() const;
+};
+
+/// How well the room recording sees the origin marker: geometrically (its
+/// four corners inside the image by 4 px, in front of the camera, seen less
+/// than 75 deg off its normal, not behind the gantry, couch base or couch
+/// top), not by running a detector.
+struct OriginVisibility {
+  int frames = 0;               ///< room frames
+  int visible_frames = 0;
+  double median_side_px = 0;    ///< mean side length in the image, median over visible frames
+  double min_side_px = 0;
+  double median_angle_deg = 0;  ///< viewing angle off the marker normal, median over visible frames
 };
 
 /// $ARPOS_BODY_MESH if set, else the shared data copy found at build time.
@@ -107,6 +152,20 @@ class Simulator {
   const World& world() const { return world_; }
   const SensorProfile& profile() const { return profile_; }
   const std::vector<SequencePlan>& sequences() const { return sequences_; }
+  /// room_from_world (World is in the world frame, outputs in the room
+  /// frame): identity unless the origin marker was moved.
+  const Rigid3d& room_from_world() const { return world_.room_from_world; }
+  /// The drawn conditions (random_conditions), else nullptr.
+  const SceneConditions* conditions() const { return random_conditions_ ? &conditions_ : nullptr; }
+  /// The origin marker in room/ (computed for every case).
+  const OriginVisibility& origin_visibility() const { return origin_visibility_; }
+  CameraResponse response() const { return response_; }
+  /// Exposure relative to the profile's (0 without auto exposure), stops.
+  double ExposureStops(double timestamp_s) const;
+  /// Anterior displacement of a fully breathing point (weight 1) at this
+  /// time, metres (0 without breathing).
+  double BreathingDisplacementM(double timestamp_s) const;
+  const DepthBias& depth_bias() const { return depth_bias_; }
   /// Ground truth beyond the case folder (what simulation.yaml holds).
   SimulationTruth Truth() const;
 
@@ -115,10 +174,12 @@ class Simulator {
 
   /// An arbitrary view (for tests and previews): the room with the patient
   /// at `room_from_model` if given (all stickers on, planning lighting, no
-  /// hand), with or without sensor noise.
+  /// hand, the profile's exposure), with or without sensor noise; poses in
+  /// the room frame. `breathing_fraction` in [0, 1]: 0 end-exhale, 1 peak
+  /// inhale (with breathing).
   SimulatedFrame RenderView(const Rigid3d& room_from_camera,
                             const std::optional<Rigid3d>& room_from_model, bool noise,
-                            uint64_t frame_key = 0) const;
+                            uint64_t frame_key = 0, double breathing_fraction = 0) const;
 
   /// Writes the case folder into `out_dir` (created; must be empty or
   /// absent). `progress(done, total)` is called after each frame.
@@ -132,11 +193,22 @@ class Simulator {
     std::optional<Rigid3d> room_from_hand;
     std::vector<bool> sticker_on;
     const Lighting* lighting = nullptr;
+    double breathing_m = 0;      ///< anterior displacement at weight 1
+    double exposure_stops = 0;
   };
   SimulatedFrame RenderScene(const Scene& scene, bool noise, uint64_t frame_key,
                              const std::function<Scene(double dt)>* scene_at) const;
   Scene SceneAt(int sequence, int frame, double dt_s) const;
   bool StickerOn(int marker_index, int sequence, int frame) const;
+  // The body surface displaced by breathing (anterior by breathing_m x weight).
+  RenderMesh BreathingBody(double breathing_m) const;
+  // --random-conditions: the planning walk with the origin marker's views.
+  void PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t trajectory_seed,
+                          SequencePlan* room);
+  std::vector<CameraKey> OriginViewKeys(const std::string& visibility, Rng* rng) const;
+  OriginVisibility MeasureOriginVisibility(const SequencePlan& room) const;
+  bool OriginSeen(const Rigid3d& world_from_camera, double* side_px, double* angle_deg) const;
+  SimulatedFrame ToRoomFrame(SimulatedFrame frame) const;
 
   SimulationOptions options_;
   SensorProfile profile_;
@@ -146,6 +218,16 @@ class Simulator {
   int sticker_off_index_ = -1;
   int sticker_off_sequence_ = -1;
   int sticker_off_frame_ = -1;
+  bool random_conditions_ = false;
+  SceneConditions conditions_;
+  std::vector<std::string> forced_;  ///< conditions set on the command line
+  CameraResponse response_ = CameraResponse::kSrgb;
+  AutoExposure auto_exposure_;
+  DepthBias depth_bias_;
+  uint64_t depth_field_seed_ = 0;
+  double breathing_m_ = 0, breathing_period_s_ = 0, breathing_phase_rad_ = 0;
+  std::vector<double> sticker_breathing_weight_;  ///< parallel to world_.body_markers
+  OriginVisibility origin_visibility_;
 };
 
 }  // namespace arpos::sim

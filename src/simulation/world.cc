@@ -18,12 +18,10 @@ namespace {
 // Room layout (room frame = marker 0 frame, z up, metres).
 constexpr double kFloorZ = -0.0003;           // paper thickness below marker faces
 constexpr double kPaperOffset = 0.0003;       // markers stand off walls by this
-constexpr double kCouchCentreX = 0.75;
-constexpr double kCouchFootY = 0.25, kCouchHeadY = 2.30;
+constexpr double kCouchCentreX = kCouchCentreX_m;
+constexpr double kCouchFootY = kCouchFootY_m, kCouchHeadY = kCouchHeadY_m;
 constexpr double kCouchWidth = 0.58;
 constexpr double kCouchTopZ = 0.80, kCouchThickness = 0.05;
-constexpr double kWallLeftX = -1.9, kWallRightX = 3.4, kWallFootY = -1.7, kWallHeadY = 4.7;
-constexpr double kCeilingZ = 2.8;
 constexpr double kTexelM = 0.004;
 
 float Smoothstep(float e0, float e1, float x) {
@@ -373,6 +371,22 @@ double RayCast(const TriangleMesh& mesh, const std::vector<int>& candidates,
 
 }  // namespace
 
+std::string RoomLayout::Check() const {
+  if (!(wall_left_x_m < -1.2) || !(wall_right_x_m > 2.8) || !(wall_foot_y_m < -1.2) ||
+      !(wall_head_y_m > 4.45) || !(ceiling_z_m > 2.75)) {
+    return "room layout: walls or ceiling too close to the couch, gantry or lights";
+  }
+  return "";
+}
+
+double World::BreathingWeight(const Eigen::Vector3d& p) const {
+  const float f = static_cast<float>((p.z() - body_lowest_z_m) / body_height_m);
+  const float along = Smoothstep(0.52f, 0.58f, f) * (1.0f - Smoothstep(0.76f, 0.82f, f));
+  const float lateral = 1.0f - Smoothstep(0.09f, 0.16f, static_cast<float>(std::abs(p.x())));
+  const float front = Smoothstep(0.0f, 0.05f, static_cast<float>(-p.y()));  // y is posterior
+  return along * lateral * front;
+}
+
 std::array<Eigen::Vector3d, 4> MarkerCornersInMarker(double size_m) {
   const double h = size_m / 2;
   return {Eigen::Vector3d(-h, h, 0), Eigen::Vector3d(h, h, 0), Eigen::Vector3d(h, -h, 0),
@@ -380,8 +394,16 @@ std::array<Eigen::Vector3d, 4> MarkerCornersInMarker(double size_m) {
 }
 
 World BuildWorld(const WorldOptions& options) {
+  if (const std::string problem = options.layout.Check(); !problem.empty()) ARPOS_INPUT_ERROR(problem);
+  ARPOS_CHECK(options.room_marker_places.empty() ||
+                  options.room_marker_places.size() == static_cast<size_t>(kRoomMarkerPlaces),
+              "room_marker_places: expected " << kRoomMarkerPlaces << " entries");
   World world;
   RenderScene& scene = world.scene;
+  world.layout = options.layout;
+  world.origin_moved = !options.world_from_origin_marker.IsApprox(Rigid3d::Identity(), 0, 0);
+  world.room_from_world = options.world_from_origin_marker.Inverse();
+  if (!world.origin_moved) world.room_from_world = Rigid3d::Identity();
   const int dictionary = cv::aruco::DICT_4X4_250;
 
   // --- Patient ---------------------------------------------------------------
@@ -406,6 +428,18 @@ World BuildWorld(const WorldOptions& options) {
   world.couch_top_height_m = kCouchTopZ;
   world.couch_top_home_centre_room_m =
       Eigen::Vector3d(kCouchCentreX, 0.5 * (kCouchFootY + kCouchHeadY), kCouchTopZ);
+  {
+    Eigen::Vector3f lo, hi;
+    body.Bounds(&lo, &hi);
+    world.body_lowest_z_m = lo.z();
+    world.body_height_m = std::max(1e-6f, hi.z() - lo.z());
+    world.body_breathing_weight.resize(body.vertices.size());
+    for (size_t i = 0; i < body.vertices.size(); ++i) {
+      // The arms lie beside the chest: they do not breathe.
+      const double w = world.BreathingWeight(body.vertices[i].cast<double>());
+      world.body_breathing_weight[i] = static_cast<float>(w * (1.0 - arm_weight[i]));
+    }
+  }
 
   // Skin, shorts and hair as vertex colours with a little low-frequency
   // variation (freckles of the texture would not survive a 1.5 cm mesh).
@@ -568,7 +602,9 @@ World BuildWorld(const WorldOptions& options) {
   const uint64_t tex_seed = StreamSeed(options.seed, Stream::kRoomTexture);
   {
     using V = Eigen::Vector3d;
-    const double L = kWallLeftX, R = kWallRightX, F = kWallFootY, Hd = kWallHeadY, C = kCeilingZ;
+    const RoomLayout& lay = options.layout;
+    const double L = lay.wall_left_x_m, R = lay.wall_right_x_m, F = lay.wall_foot_y_m,
+                 Hd = lay.wall_head_y_m, C = lay.ceiling_z_m;
     world.room_meshes.push_back(AddTexturedPlane(&scene, "floor", SurfaceStyle::kFloor,
                                                  V(L, F, kFloorZ), V(R, F, kFloorZ),
                                                  V(R, Hd, kFloorZ), V(L, Hd, kFloorZ), tex_seed + 1));
@@ -594,6 +630,11 @@ World BuildWorld(const WorldOptions& options) {
     world.room_meshes.push_back(AddTexturedBox(&scene, "couch_base", SurfaceStyle::kCouchBase,
                                                V(kCouchCentreX - 0.2, 0.95, kFloorZ),
                                                V(kCouchCentreX + 0.2, 1.75, 0.72), tex_seed + 8));
+    world.occluders = {
+        {V(kCouchCentreX - 0.9, 3.35, kFloorZ), V(kCouchCentreX + 0.9, 4.35, 2.45)},
+        {V(kCouchCentreX - 0.2, 0.95, kFloorZ), V(kCouchCentreX + 0.2, 1.75, 0.72)},
+        {V(kCouchCentreX - kCouchWidth / 2, kCouchFootY, kCouchTopZ - kCouchThickness),
+         V(kCouchCentreX + kCouchWidth / 2, kCouchHeadY, kCouchTopZ)}};
     // Couch top: moves with the patient, so it lives in the model frame.
     const int top = AddTexturedPlane(
         &scene, "couch_top", SurfaceStyle::kCouchTop,
@@ -636,16 +677,18 @@ World BuildWorld(const WorldOptions& options) {
         {"couch_base", V(cx + 0.2 + kPaperOffset, 1.35, 0.42), V(1, 0, 0), 0.05},
         {"couch_base", V(cx, 0.95 - kPaperOffset, 0.42), V(0, -1, 0), 0.03},
     };
+    const RoomLayout& lay = options.layout;
     for (double y : {-0.8, 0.5, 1.7, 3.0}) {
-      places.push_back({"wall_left", V(kWallLeftX + kPaperOffset, y, 1.25), V(1, 0, 0), 0.2});
-      places.push_back({"wall_right", V(kWallRightX - kPaperOffset, y, 1.35), V(-1, 0, 0), 0.2});
+      places.push_back({"wall_left", V(lay.wall_left_x_m + kPaperOffset, y, 1.25), V(1, 0, 0), 0.2});
+      places.push_back({"wall_right", V(lay.wall_right_x_m - kPaperOffset, y, 1.35), V(-1, 0, 0), 0.2});
     }
     for (double x : {-1.0, 0.4, 1.6, 2.7}) {
-      places.push_back({"wall_foot", V(x, kWallFootY + kPaperOffset, 1.3), V(0, 1, 0), 0.2});
+      places.push_back({"wall_foot", V(x, lay.wall_foot_y_m + kPaperOffset, 1.3), V(0, 1, 0), 0.2});
     }
     for (double x : {-1.2, 2.6}) {
-      places.push_back({"wall_head", V(x, kWallHeadY - kPaperOffset, 1.4), V(0, -1, 0), 0.15});
+      places.push_back({"wall_head", V(x, lay.wall_head_y_m - kPaperOffset, 1.4), V(0, -1, 0), 0.15});
     }
+    ARPOS_CHECK(places.size() == static_cast<size_t>(kRoomMarkerPlaces) + 1, "room marker places");
     std::vector<int> ids;
     for (int id = 1; id <= 49; ++id) ids.push_back(id);
     for (size_t i = ids.size() - 1; i > 0; --i) {
@@ -658,7 +701,7 @@ World BuildWorld(const WorldOptions& options) {
       m.id = k == 0 ? 0 : ids[k - 1];
       m.size_m = size;
       m.frame = "room";
-      m.surface = pl.surface;
+      m.surface = k == 0 ? options.origin_surface : pl.surface;
       Eigen::Vector3d centre = pl.centre;
       const Eigen::Vector3d n = pl.normal;
       // In-plane jitter and rotation (none for the origin marker).
@@ -674,7 +717,14 @@ World BuildWorld(const WorldOptions& options) {
       }
       const Eigen::Vector3d x = up.cross(n);
       m.parent_from_marker = FrameFromAxes(x, up, n, centre);
-      if (k == 0) m.parent_from_marker = Rigid3d::Identity();
+      if (k == 0) m.parent_from_marker = options.world_from_origin_marker;
+      // Places left empty still drew their jitter: the others stay put.
+      if (k > 0 && !options.room_marker_places.empty() && !options.room_marker_places[k - 1]) continue;
+      // A moved origin marker takes the place of any marker it would overlap.
+      if (k > 0 && world.origin_moved &&
+          (centre - options.world_from_origin_marker.translation).norm() < 2.5 * size) {
+        continue;
+      }
       const auto corners = MarkerCornersInMarker(size);
       for (int c = 0; c < 4; ++c) m.corners_m[c] = m.parent_from_marker * corners[c];
       world.room_markers.push_back(m);
