@@ -30,7 +30,26 @@ const char kUsage[] =
     "  --body-mesh PATH            MakeHuman base.obj (default: $ARPOS_BODY_MESH or the\n"
     "                              shared data copy)\n"
     "  --png-compression 0..9      PNG compression level (default 1)\n"
-    "  --supersampling S           colour samples per pixel axis: 1, 3 or 5 (default 3)\n";
+    "  --supersampling S           colour samples per pixel axis: 1, 3 or 5 (default 3)\n"
+    "\n"
+    "sensor and patient conditions (default: none of them; all recorded in simulation.yaml):\n"
+    "  --response NAME             colour camera response: srgb (default), linear,\n"
+    "                              gamma2.6 (y = x^(1/2.6)), scurve (sRGB then a contrast\n"
+    "                              S-curve with toe and shoulder); see camera_response.h\n"
+    "  --auto-exposure             exposure drifting smoothly by up to +-1 stop, applied\n"
+    "                              before the response (bright parts clip at 255)\n"
+    "  --depth-scale-error F       depth reads F too long (0.003 = +0.3 %)\n"
+    "  --depth-field-mm A          smooth depth error field over the image, A mm at 1 m\n"
+    "                              (growing with depth squared)\n"
+    "  --flying-pixels             depths between the two surfaces at depth edges\n"
+    "  --breathing-mm A            the anterior torso moves A mm peak to peak (period 3-5 s);\n"
+    "                              the reference model and body ground truth are end-exhale\n"
+    "  --random-conditions         draw the scene from the seed: origin marker placement\n"
+    "                              (floor near the couch, farther, on a wall), its\n"
+    "                              visibility (good, medium, poor: a few glancing views),\n"
+    "                              room marker count and size, room size, walk and pace,\n"
+    "                              response, auto exposure, depth bias, breathing; the\n"
+    "                              options above force a condition over the drawn one\n";
 
 void ParseFrames(const std::string& text, sim::SimulationOptions* options) {
   size_t start = 0;
@@ -70,8 +89,9 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     }
     const Args args(argv,
                     {"profile", "seed", "frames", "tracking-sequences", "room-walk", "body-mesh",
-                     "png-compression", "supersampling"},
-                    {"hard", "no-noise"});
+                     "png-compression", "supersampling", "response", "depth-scale-error",
+                     "depth-field-mm", "breathing-mm"},
+                    {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
     if (args.positional().size() != 1) {
       std::cerr << "simulate: expected one OUT_DIR\n" << kUsage;
       return 2;
@@ -89,11 +109,31 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     if (auto mesh = args.Get("body-mesh")) options.body_mesh_path = *mesh;
     options.png_compression = static_cast<int>(args.GetInt("png-compression", 1));
     options.supersampling = static_cast<int>(args.GetInt("supersampling", 0));
+    if (auto response = args.Get("response")) options.response = *response;
+    if (args.Has("auto-exposure")) options.auto_exposure = true;
+    if (args.Has("depth-scale-error")) options.depth_scale_error = args.GetDouble("depth-scale-error", 0);
+    if (args.Has("depth-field-mm")) options.depth_field_mm = args.GetDouble("depth-field-mm", 0);
+    if (args.Has("flying-pixels")) options.flying_pixels = true;
+    if (args.Has("breathing-mm")) options.breathing_mm = args.GetDouble("breathing-mm", 0);
+    options.random_conditions = args.Has("random-conditions");
 
     const sim::Simulator simulator(options);
     const std::string out_dir = args.positional().front();
     std::cerr << "simulate: " << simulator.profile().Describe() << ", seed " << options.seed
               << (options.hard ? ", hard" : "") << (options.noise ? "" : ", no noise") << "\n";
+    if (const sim::SceneConditions* c = simulator.conditions()) {
+      const sim::OriginVisibility& v = simulator.origin_visibility();
+      std::cerr << StringPrintf(
+          "simulate: conditions: origin %s (%s), %s views: seen in %d of %d room frames, %.0f px, "
+          "%.0f deg; %zu room markers of %.2f m; response %s%s; depth scale %+.3f %%, field %.1f "
+          "mm%s; breathing %.1f mm\n",
+          c->origin_placement.c_str(), c->origin_surface.c_str(), c->origin_visibility.c_str(),
+          v.visible_frames, v.frames, v.median_side_px, v.median_angle_deg,
+          simulator.world().room_markers.size() - 1, c->room_marker_size_m,
+          sim::ResponseName(c->response).c_str(), c->auto_exposure ? " + auto exposure" : "",
+          100 * c->depth_scale_error, c->depth_field_mm, c->flying_pixels ? ", flying pixels" : "",
+          c->breathing_mm);
+    }
     int last_percent = -1;
     const sim::SimulationReport report =
         simulator.WriteCase(out_dir, [&](int done, int total) {

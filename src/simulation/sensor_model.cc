@@ -267,14 +267,14 @@ cv::Mat SimulateDepth(const RenderOutput& render, const SensorProfile& profile, 
         bool flying = false;
         if (edge && bias.flying_pixels) {
           // ... or some report a depth between the two surfaces.
-          double far = 0;
+          double far = 0, jump = 0;
           for (int k = 0; k < 4; ++k) {
             const int xx = x + dx[k], yy = y + dy[k];
             if (xx < 0 || yy < 0 || xx >= W || yy >= H) continue;
             const float zn = z.at<float>(yy, xx);
-            if (zn > 0 && std::abs(zn - d) > profile.edge_relative_jump * d &&
-                std::abs(zn - d) > std::abs(far - d)) {
+            if (zn > 0 && std::abs(zn - d) > profile.edge_relative_jump * d && std::abs(zn - d) > jump) {
               far = zn;
+              jump = std::abs(zn - d);
             }
           }
           if (far > 0 && PixelUniform(HashCombine(key, 5), x, y) < 0.5) {

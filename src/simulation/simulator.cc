@@ -519,12 +519,27 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
   const double duration = std::max(1.0 / kFps, (room->frames - 1) * room->frame_interval_s);
   const int needed = std::min(3, room->frames);
   std::string visibility = conditions_.origin_visibility;
-  // A drawn view that sees the marker too rarely (hidden, off the image) is
-  // drawn again; after 10 tries the walk falls back to good views.
-  for (int attempt = 0; attempt < 14; ++attempt) {
-    if (attempt == 10) visibility = "good";
+  // Poor visibility: the walk's own views do not look at the marker either
+  // (the recording glances at it once).
+  std::vector<CameraKey> base = keys;
+  if (visibility == "poor") {
+    base.clear();
+    for (const CameraKey& k : keys) {
+      double side = 0, angle = 0;
+      if (!OriginSeen(LookAt(k.position_m, k.look_at_m), &side, &angle)) base.push_back(k);
+    }
+  }
+  const int poor_at_most = std::max(6, room->frames / 5);
+  // A drawn view that sees the marker too rarely (hidden, off the image), or
+  // for poor visibility too often, is drawn again; after 12 tries the walk
+  // falls back to good views.
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    if (attempt == 12) {
+      visibility = "good";
+      base = keys;
+    }
     const std::vector<CameraKey> views = OriginViewKeys(visibility, &walk_rng);
-    std::vector<CameraKey> all = keys;
+    std::vector<CameraKey> all = base;
     if (views.size() == 2) {
       all.insert(all.begin(), views[0]);
       all.push_back(views[1]);
@@ -547,7 +562,8 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
     }
     room->camera = HandheldTrajectory(all, duration, trajectory_seed);
     origin_visibility_ = MeasureOriginVisibility(*room);
-    if (origin_visibility_.visible_frames >= needed) break;
+    const bool too_often = visibility == "poor" && attempt < 10 && origin_visibility_.visible_frames > poor_at_most;
+    if (origin_visibility_.visible_frames >= needed && !too_often) break;
   }
   conditions_.origin_visibility = visibility;
 }
