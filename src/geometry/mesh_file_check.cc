@@ -1,5 +1,6 @@
 #include "geometry/mesh_file_check.h"
 
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -80,6 +81,20 @@ int64_t ReadBinaryInt(const char* p, int size, bool is_signed, bool big_endian) 
     raw |= ~uint64_t{0} << (8 * size);  // sign-extend
   }
   return static_cast<int64_t>(raw);
+}
+
+// Reads a float (4 bytes) or double (8 bytes) from binary PLY data.
+double ReadBinaryFloat(const char* p, int size, bool big_endian) {
+  const uint64_t raw = static_cast<uint64_t>(ReadBinaryInt(p, size, false, big_endian));
+  if (size == 4) {
+    const uint32_t bits = static_cast<uint32_t>(raw);
+    float value;
+    std::memcpy(&value, &bits, 4);
+    return value;
+  }
+  double value;
+  std::memcpy(&value, &raw, 8);
+  return value;
 }
 
 void CheckPly(const fs::path& path, const std::string& data) {
@@ -163,7 +178,13 @@ void CheckPly(const fs::path& path, const std::string& data) {
                                  << " " << e.name << " elements, the data stops in number " << n);
         };
         auto bad_number = [&](const std::string& token) {
-          ARPOS_INPUT_ERROR(name << ": PLY " << e.name << " " << n << ": '" << token << "' is not a number");
+          ARPOS_INPUT_ERROR(name << ": PLY " << e.name << " " << n << ": '" << token
+                                 << "' is not a finite number");
+        };
+        auto not_finite = [&](double value) {
+          const bool coordinate = p.name == "x" || p.name == "y" || p.name == "z";
+          ARPOS_INPUT_ERROR(name << ": PLY " << e.name << " " << n << " has " << p.name << " = " << value << ": "
+                                 << (coordinate ? "coordinates must be finite numbers" : "must be a finite number"));
         };
         uint64_t items = 1;
         if (p.is_list) {
@@ -190,6 +211,10 @@ void CheckPly(const fs::path& path, const std::string& data) {
           if (binary) {
             if (pos + p.value_size > data.size()) truncated();
             if (indices) index = ReadBinaryInt(data.data() + pos, p.value_size, p.value_signed, big);
+            if (p.value_float) {
+              const double value = ReadBinaryFloat(data.data() + pos, p.value_size, big);
+              if (!std::isfinite(value)) not_finite(value);
+            }
             pos += p.value_size;
           } else {
             const std::string token = next_token();

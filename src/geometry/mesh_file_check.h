@@ -8,8 +8,8 @@
 /// header declares aborts the process; an ASCII PLY with a missing face, or an
 /// OFF face index beyond the vertex count, is accepted with invented faces.
 /// This check walks the file against its own header (counts, sizes, face
-/// indices) without building a mesh, so such files are refused with a clear
-/// message instead. Other extensions pass unchecked (assimp's OBJ and STL
+/// indices, finite coordinates) without building a mesh, so such files are
+/// refused with a clear message instead. Other extensions pass unchecked (assimp's OBJ and STL
 /// readers refuse those cases themselves).
 
 #include <filesystem>
@@ -18,8 +18,8 @@ namespace arpos {
 
 /// Throws InputError naming `path` if a .ply, .off or binary .stl file is
 /// malformed: unknown header, counts larger than the file can hold, data
-/// shorter than declared, face indices out of range, non-numbers. Returns
-/// silently for a sound file or another extension.
+/// shorter than declared, face indices out of range, non-numbers, NaN or
+/// infinite values. Returns silently for a sound file or another extension.
 void CheckMeshFileStructure(const std::filesystem::path& path);
 
 }  // namespace arpos

@@ -91,6 +91,14 @@ TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadO
     for (unsigned v = 0; v < mesh->mNumVertices; ++v) {
       const aiVector3D p = transform * mesh->mVertices[v];
       const Eigen::Vector3f position(p.x * scale, p.y * scale, p.z * scale);
+      if (!position.allFinite()) {
+        // Before merging: a NaN compares equal to every position and would
+        // silently become another vertex.
+        const aiVector3D& raw = mesh->mVertices[v];
+        ARPOS_INPUT_ERROR(path.string() << ": vertex " << v << " is (" << raw.x << ", " << raw.y << ", "
+                                        << raw.z << ")" << (scale != 1.0f ? " in file units" : "")
+                                        << ": coordinates must be finite numbers");
+      }
       if (options.merge_identical_positions && !have_normals) {
         const auto key = std::make_tuple(position.x(), position.y(), position.z());
         const auto [it, inserted] = merged.emplace(key, static_cast<int>(result.vertices.size()));
@@ -120,9 +128,6 @@ TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadO
                                     << (options.only_group.empty()
                                             ? std::string()
                                             : " in group '" + options.only_group + "'"));
-  }
-  for (const auto& v : result.vertices) {
-    if (!v.allFinite()) ARPOS_INPUT_ERROR(path.string() << ": mesh has non-finite coordinates");
   }
   return result;
 }

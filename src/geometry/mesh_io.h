@@ -31,7 +31,9 @@ struct MeshLoadOptions {
 /// Every mesh of the scene (or of the selected group) is concatenated in
 /// scene-graph order with its node transforms applied. Faces keep the file's
 /// winding. Throws InputError naming the file if it is missing, unreadable,
-/// corrupt, has no triangles, or the requested group is absent.
+/// corrupt (mesh_file_check.h), has no triangles, a vertex with a NaN or
+/// infinite coordinate (naming the vertex and its value), or the requested
+/// group is absent.
 TriangleMesh LoadTriangleMesh(const std::filesystem::path& path,
                               const MeshLoadOptions& options);
 /// Same with only a unit scale.

@@ -2,6 +2,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 #include <set>
+#include <sstream>
 
 #include "geometry/mesh_io.h"
 #include "geometry/rigid3.h"
@@ -41,11 +42,14 @@ class Checker {
       return report_;
     }
     CheckConfig();
-    CheckReferenceModel();
-    CheckTargetPose();
-    const bool has_room = CheckSequenceIfPresent("room", /*required=*/true, /*body_gt=*/false);
-    CheckSequenceIfPresent("body_scan", /*required=*/true, /*body_gt=*/true);
-    (void)has_room;
+    if (options_.reference_model) CheckReferenceModel();
+    if (options_.target_pose) CheckTargetPose();
+    if (options_.sequences) {
+      for (const auto& sequence : *options_.sequences) CheckSequenceIfPresent(DisplayName(sequence), true);
+      return report_;
+    }
+    CheckSequenceIfPresent("room", /*required=*/true);
+    CheckSequenceIfPresent("body_scan", /*required=*/true);
     const fs::path tracking = root_ / "tracking";
     if (!fs::is_directory(tracking)) {
       Warning("tracking/", "no tracking sequences (nothing to track or evaluate)");
@@ -56,7 +60,7 @@ class Checker {
       }
       if (dirs.empty()) Warning("tracking/", "holds no sequence folders");
       for (const auto& dir : dirs) {
-        CheckSequenceIfPresent("tracking/" + dir.filename().string(), true, true);
+        CheckSequenceIfPresent("tracking/" + dir.filename().string(), true);
       }
     }
     return report_;
@@ -77,6 +81,14 @@ class Checker {
       out.erase(pos, prefix.size());
     }
     return out;
+  }
+  // A sequence folder as the messages name it: relative to the case if it
+  // lies inside it.
+  std::string DisplayName(const fs::path& sequence) const {
+    if (sequence.is_relative()) return sequence.generic_string();
+    const fs::path inside = sequence.lexically_normal().lexically_relative(fs::absolute(root_).lexically_normal());
+    if (inside.empty() || *inside.begin() == "..") return sequence.string();
+    return inside.generic_string();
   }
   // "file: rest" -> (file, rest) for reader messages.
   void ErrorFromException(const std::string& fallback_where, const std::exception& e) {
@@ -110,24 +122,17 @@ class Checker {
       return;
     }
     std::error_code ec;
-    if (fs::file_size(model, ec) == 0 || ec) {
-      Error(model.filename().string(), "empty file");
+    if (!fs::is_regular_file(model, ec)) {
+      Error(model.filename().string(), "not a regular file");
+      return;
+    }
+    if (fs::file_size(model, ec) == 0 && !ec) {
+      Error(model.filename().string(), "empty file (0 bytes)");
       return;
     }
     try {
-      const TriangleMesh mesh = LoadTriangleMesh(model);
-      Eigen::Vector3f lo, hi;
-      mesh.Bounds(&lo, &hi);
-      const double extent_m = (hi - lo).maxCoeff();
-      if (extent_m > 3.0) {
-        Error(model.filename().string(),
-              StringPrintf("extends %.1f units: a body surface in metres spans 0.05-3 (is it in "
-                           "millimetres? convert it with arpos import-model --units mm)",
-                           extent_m));
-      } else if (extent_m < 0.05) {
-        Error(model.filename().string(),
-              StringPrintf("extends only %.4f m: too small for a body surface in metres", extent_m));
-      }
+      const std::string problem = ReferenceModelSizeProblem(LoadTriangleMesh(model));
+      if (!problem.empty()) Error(model.filename().string(), problem);
     } catch (const std::exception& e) {
       ErrorFromException(model.filename().string(), e);
     }
@@ -140,21 +145,14 @@ class Checker {
       return;
     }
     try {
-      const Eigen::Matrix4d m = ReadMatrix4(target);
-      std::string reason;
-      if (!IsRigidTransform(m, 1e-4, &reason)) {
-        Error("target_pose.txt", "not a rigid transform: " + reason);
-      } else if (m.topRightCorner<3, 1>().norm() > 100) {
-        Error("target_pose.txt",
-              StringPrintf("translation is %.1f m from the room origin: are the units millimetres?",
-                           m.topRightCorner<3, 1>().norm()));
-      }
+      const std::string problem = TargetPoseProblem(ReadMatrix4(target));
+      if (!problem.empty()) Error("target_pose.txt", problem);
     } catch (const std::exception& e) {
       ErrorFromException("target_pose.txt", e);
     }
   }
 
-  bool CheckSequenceIfPresent(const std::string& name, bool required, bool body_gt) {
+  bool CheckSequenceIfPresent(const std::string& name, bool required) {
     const fs::path dir = root_ / name;
     if (!fs::is_directory(dir)) {
       if (required) Error(name + "/", "sequence folder missing");
@@ -189,6 +187,7 @@ class Checker {
           Error(where, StringPrintf("timestamps not increasing at line %d (%.6f after %.6f)",
                                     lists[k][i].line, lists[k][i].timestamp_s,
                                     lists[k][i - 1].timestamp_s));
+          lists_ok = false;  // Sequence::Open refuses it too: said once
           break;
         }
       }
@@ -222,11 +221,7 @@ class Checker {
     }
     if (have_config_) CheckImages(name, seq);
     CheckGroundTruth(name, dir / "groundtruth.txt", seq);
-    if (body_gt) {
-      CheckGroundTruth(name, dir / "body_groundtruth.txt", seq);
-    } else if (fs::exists(dir / "body_groundtruth.txt")) {
-      CheckGroundTruth(name, dir / "body_groundtruth.txt", seq);
-    }
+    CheckGroundTruth(name, dir / "body_groundtruth.txt", seq);
     return true;
   }
 
@@ -263,6 +258,17 @@ class Checker {
         return;
       }
     }
+    for (size_t i = 0; i < poses.size(); ++i) {
+      const Eigen::Vector3d& t = poses[i].room_from_x.translation;
+      if (t.norm() > kMaxRoomDistanceM) {
+        Error(where, StringPrintf("pose %zu (t = %.6f) is %.1f m from the room origin, farther than %.0f m%s",
+                                  i + 1, poses[i].timestamp_s, t.norm(), kMaxRoomDistanceM,
+                                  t.norm() / 1000 <= kMaxRoomDistanceM
+                                      ? ": looks like millimetres (poses are in metres)"
+                                      : ": not a pose in the room"));
+        return;
+      }
+    }
     std::vector<double> frame_t, gt_t;
     for (size_t i = 0; i < seq.size(); ++i) frame_t.push_back(seq.timestamp_s(i));
     for (const auto& p : poses) gt_t.push_back(p.timestamp_s);
@@ -285,6 +291,60 @@ class Checker {
 CaseCheckReport CheckCase(const fs::path& root, const CaseCheckOptions& options,
                           const std::function<void(const std::string&)>& progress) {
   return Checker(root, options, progress).Run();
+}
+
+CaseCheckReport RequireValidCase(const fs::path& root, const CaseCheckOptions& options) {
+  CaseCheckReport report = CheckCase(root, options);
+  if (report.ok()) return report;
+  std::ostringstream errors;
+  for (const auto& p : report.problems) {
+    if (p.severity == CaseProblem::Severity::kError) errors << "\n  " << p.ToString();
+  }
+  ARPOS_INPUT_ERROR(root.string() << ": the case has problems (`arpos check " << root.string()
+                                  << "` lists them all):" << errors.str());
+}
+
+std::string TargetPoseProblem(const Eigen::Matrix4d& room_from_model) {
+  std::string reason;
+  if (!IsRigidTransform(room_from_model, 1e-4, &reason)) return "not a rigid transform: " + reason;
+  const Eigen::Vector3d t = room_from_model.topRightCorner<3, 1>();
+  if (t.norm() <= kMaxRoomDistanceM) return "";
+  return StringPrintf("translation (%.3f, %.3f, %.3f) is %.1f m from the room origin, farther than %.0f m: %s", t.x(),
+                      t.y(), t.z(), t.norm(), kMaxRoomDistanceM,
+                      t.norm() / 1000 <= kMaxRoomDistanceM
+                          ? "looks like millimetres (target_pose.txt is in metres)"
+                          : "not a pose in the treatment room (target_pose.txt is in metres)");
+}
+
+std::string ReferenceModelSizeProblem(const TriangleMesh& model) {
+  Eigen::Vector3f lo, hi;
+  model.Bounds(&lo, &hi);
+  const double extent = (hi - lo).cast<double>().maxCoeff();
+  if (extent >= kMinReferenceModelExtentM && extent <= kMaxReferenceModelExtentM) return "";
+  // The unit that would make it body-sized, as arpos import-model detects it.
+  const char* unit = nullptr;
+  if (extent > kMaxReferenceModelExtentM) {
+    if (extent <= 1000 * kMaxReferenceModelExtentM && extent >= 1000 * kMinReferenceModelExtentM) {
+      unit = "mm";
+    } else if (extent < 200) {
+      unit = extent >= 20 ? "cm" : "dm";
+    }
+  }
+  std::string problem = StringPrintf(
+      "largest extent is %g m: not a body surface in metres (%.2f-%.0f m)", extent, kMinReferenceModelExtentM,
+      kMaxReferenceModelExtentM);
+  if (unit != nullptr) {
+    problem += StringPrintf("; looks like %s: convert it with arpos import-model MODEL --units %s --out MODEL.ply",
+                            std::string(unit) == "mm" ? "millimetres"
+                            : std::string(unit) == "cm" ? "centimetres"
+                                                        : "decimetres",
+                            unit);
+  } else if (extent > kMaxReferenceModelExtentM) {
+    problem += ": far too large in any length unit";
+  } else {
+    problem += ": too small for a body surface in metres";
+  }
+  return problem;
 }
 
 }  // namespace arpos

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "sensor/case_check.h"
 #include "sensor/tum_io.h"
 #include "util/check.h"
 
@@ -30,10 +31,8 @@ CaseFolder LoadCaseFolder(const std::filesystem::path& root) {
   const auto target = root / "target_pose.txt";
   if (!std::filesystem::exists(target)) ARPOS_INPUT_ERROR(target.string() << ": missing");
   const Eigen::Matrix4d m = ReadMatrix4(target);
-  std::string reason;
-  if (!IsRigidTransform(m, 1e-4, &reason)) {
-    ARPOS_INPUT_ERROR(target.string() << ": not a rigid transform: " << reason);
-  }
+  const std::string problem = TargetPoseProblem(m);
+  if (!problem.empty()) ARPOS_INPUT_ERROR(target.string() << ": " << problem);
   folder.room_from_model_target = Rigid3d::FromMatrix(m, 1e-4);
   folder.room_dir = root / "room";
   folder.body_scan_dir = root / "body_scan";

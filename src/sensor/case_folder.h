@@ -23,8 +23,10 @@ struct CaseFolder {
   std::filesystem::path case_yaml() const { return root / "case.yaml"; }
 };
 
-/// Reads case.yaml and target_pose.txt and locates the rest. Throws InputError
-/// naming the file at the first problem; `arpos check` (CheckCase) reports all.
+/// Reads case.yaml and target_pose.txt (rigid, in the room: TargetPoseProblem)
+/// and locates the rest. Throws InputError naming the file at the first
+/// problem; `arpos check` (CheckCase) reports all, and stages call
+/// RequireValidCase first (case_check.h).
 CaseFolder LoadCaseFolder(const std::filesystem::path& root);
 
 /// Finds reference_model.* in `root` (ply, stl, obj, off in that order).

@@ -4,6 +4,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "util/check.h"
+#include "util/string_util.h"
 
 namespace arpos {
 
@@ -20,6 +21,17 @@ Sequence Sequence::Open(const std::filesystem::path& folder) {
   }
   const auto rgb = ReadImageList(folder / "rgb.txt");
   const auto depth = ReadImageList(folder / "depth.txt");
+  // Frames are used in list order as time order (tracking, association).
+  for (const auto* list : {&rgb, &depth}) {
+    for (size_t i = 1; i < list->size(); ++i) {
+      if (!((*list)[i].timestamp_s > (*list)[i - 1].timestamp_s)) {
+        ARPOS_INPUT_ERROR((folder / (list == &rgb ? "rgb.txt" : "depth.txt")).string()
+                          << ":" << (*list)[i].line << ": timestamps not increasing ("
+                          << StringPrintf("%.6f after %.6f", (*list)[i].timestamp_s, (*list)[i - 1].timestamp_s)
+                          << ")");
+      }
+    }
+  }
   std::vector<double> rgb_t, depth_t;
   for (const auto& e : rgb) rgb_t.push_back(e.timestamp_s);
   for (const auto& e : depth) depth_t.push_back(e.timestamp_s);

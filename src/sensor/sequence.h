@@ -19,7 +19,8 @@ constexpr double kFrameAssociationS = 0.02;
 class Sequence {
  public:
   /// Reads the lists and associates colour with depth. Throws InputError
-  /// naming the file when a list is missing or malformed or no frame pairs up.
+  /// naming the file when a list is missing or malformed, its timestamps do
+  /// not increase (naming the line), or no frame pairs up.
   /// Images are not read here.
   static Sequence Open(const std::filesystem::path& folder);
 

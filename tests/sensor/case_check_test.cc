@@ -1,10 +1,15 @@
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
+#include "geometry/mesh_io.h"
 #include "sensor/case_check.h"
+#include "sensor/case_folder.h"
+#include "sensor/sequence.h"
 #include "sensor/test_case_builder.h"
+#include "util/check.h"
 #include "util/file.h"
 
 namespace arpos {
@@ -99,7 +104,125 @@ TEST_F(CaseCheckTest, ReferenceModelTruncatedOrInMillimetres) {
                   "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
                   "end_header\n0 0 0\n100 0 0\n0 100 0\n0 0 100\n3 0 2 1\n3 0 1 3\n3 0 3 2\n"
                   "3 1 2 3\n");
-  ExpectError("reference_model.ply", "is it in millimetres?");
+  ExpectError("reference_model.ply", "largest extent is 100 m: not a body surface in metres");
+  ExpectError("reference_model.ply", "looks like millimetres: convert it with arpos import-model");
+}
+
+// The tetrahedron as binary PLY with a fifth vertex that one face uses.
+std::string BinaryPlyWithFifthVertex(float x) {
+  const float vertices[5][3] = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}, {0, 0, 0.1f}, {x, 0.05f, 0.05f}};
+  const int faces[5][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}, {4, 1, 2}};
+  std::string ply =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+      "property float z\nelement face 5\nproperty list uchar int vertex_indices\nend_header\n";
+  for (const auto& v : vertices) ply.append(reinterpret_cast<const char*>(v), sizeof v);
+  for (const auto& f : faces) {
+    ply.push_back(3);
+    ply.append(reinterpret_cast<const char*>(f), sizeof f);
+  }
+  return ply;
+}
+
+// A NaN vertex used to merge silently with another vertex (NaN compares
+// equal to everything) and pass.
+TEST_F(CaseCheckTest, ReferenceModelWithANanVertexIsRefusedNamingTheVertex) {
+  WriteFileAtomic(root() / "reference_model.ply", BinaryPlyWithFifthVertex(std::nanf("")));
+  ExpectError("reference_model.ply", "PLY vertex 4 has x = nan: coordinates must be finite numbers");
+  WriteFileAtomic(root() / "reference_model.ply", BinaryPlyWithFifthVertex(INFINITY));
+  ExpectError("reference_model.ply", "PLY vertex 4 has x = inf");
+  WriteFileAtomic(root() / "reference_model.ply",
+                  "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
+                  "end_header\n0 0 0\n0.1 0 0\n0 nan 0\n0 0 0.1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n"
+                  "3 1 2 3\n");
+  ExpectError("reference_model.ply", "PLY vertex 2: 'nan' is not a finite number");
+  // Formats without a structure check: the loader refuses it.
+  fs::remove(root() / "reference_model.ply");
+  WriteFileAtomic(root() / "reference_model.obj",
+                  "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0 0 nan\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n");
+  ExpectError("reference_model.obj", "is (0, 0, nan): coordinates must be finite numbers");
+  // The valid file still loads, every vertex kept.
+  fs::remove(root() / "reference_model.obj");
+  WriteFileAtomic(root() / "reference_model.ply", BinaryPlyWithFifthVertex(0.05f));
+  EXPECT_EQ(LoadTriangleMesh(root() / "reference_model.ply").vertices.size(), 5u);
+}
+
+TEST_F(CaseCheckTest, GarbageOrEmptyReferenceModelIsNamedAsSuch) {
+  std::string garbage;
+  for (int i = 0; i < 3000; ++i) garbage.push_back(static_cast<char>((i * 131 + 7) % 256));
+  WriteFileAtomic(root() / "reference_model.ply", garbage);
+  ExpectError("reference_model.ply", "not a PLY file");
+  WriteFileAtomic(root() / "reference_model.ply", "");
+  ExpectError("reference_model.ply", "empty file (0 bytes)");
+  fs::remove(root() / "reference_model.ply");
+  fs::create_directory(root() / "reference_model.ply");
+  ExpectError("reference_model.ply", "not a regular file");
+}
+
+TEST_F(CaseCheckTest, TargetPoseInMillimetresIsRefusedNamingTheValue) {
+  WriteFileAtomic(root() / "target_pose.txt", "1 0 0 1800\n0 1 0 -150\n0 0 1 950\n0 0 0 1\n");
+  ExpectError("target_pose.txt", "translation (1800.000, -150.000, 950.000) is 2040.8 m from the room origin");
+  ExpectError("target_pose.txt", "looks like millimetres (target_pose.txt is in metres)");
+  // The reader the stages use refuses it too.
+  try {
+    LoadCaseFolder(root());
+    ADD_FAILURE() << "a target pose 2 km away was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("target_pose.txt: translation"), std::string::npos) << e.what();
+  }
+  WriteFileAtomic(root() / "target_pose.txt", "1 0 0 nan\n0 1 0 0\n0 0 1 0\n0 0 0 1\n");
+  ExpectError("target_pose.txt", "'nan' is not a number");
+}
+
+TEST_F(CaseCheckTest, GroundTruthInMillimetresIsRefused) {
+  WriteFileAtomic(root() / "body_scan" / "body_groundtruth.txt",
+                  "1.0 700 1300 900 0 0 0 1\n1.033333 700 1300 900 0 0 0 1\n");
+  ExpectError("body_scan/body_groundtruth.txt", "pose 1 (t = 1.000000) is 1729.2 m from the room origin");
+  ExpectError("body_scan/body_groundtruth.txt", "looks like millimetres");
+}
+
+TEST_F(CaseCheckTest, OutOfOrderTimestampsAreRefusedByTheSequenceReaderToo) {
+  WriteFileAtomic(root() / "body_scan" / "depth.txt",
+                  "1.0 depth/0.png\n1.066667 depth/2.png\n1.033333 depth/1.png\n");
+  ExpectError("body_scan/depth.txt", "timestamps not increasing at line 3");
+  // Said once, not again by the reader.
+  EXPECT_EQ(Problems().find("body_scan/: "), std::string::npos) << Problems();
+  try {
+    Sequence::Open(root() / "body_scan");
+    ADD_FAILURE() << "out-of-order timestamps were read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("body_scan/depth.txt:3: timestamps not increasing (1.033333 after 1.066667)"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// A stage checks what it reads, with the same messages, quickly.
+TEST_F(CaseCheckTest, RequireValidCaseChecksWhatAStageReads) {
+  WriteFileAtomic(root() / "body_scan" / "rgb" / "1.png", "garbage");
+  CaseCheckOptions room_only;
+  room_only.read_all_images = false;
+  room_only.sequences = std::vector<fs::path>{"room"};
+  EXPECT_TRUE(RequireValidCase(root(), room_only).ok());
+  CaseCheckOptions scan_only = room_only;
+  scan_only.sequences = std::vector<fs::path>{root() / "body_scan"};
+  try {
+    RequireValidCase(root(), scan_only);
+    ADD_FAILURE() << "a corrupt body-scan image passed";
+  } catch (const InputError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find(root().string() + ": the case has problems (`arpos check " + root().string() +
+                           "` lists them all):\n  error: body_scan/rgb/1.png: unreadable or corrupt image"),
+              std::string::npos)
+        << message;
+  }
+  // Without the reference model and target pose checks (localisation reads neither).
+  fs::remove(root() / "target_pose.txt");
+  CaseCheckOptions config_and_sequence = room_only;
+  config_and_sequence.target_pose = false;
+  config_and_sequence.reference_model = false;
+  EXPECT_TRUE(RequireValidCase(root(), config_and_sequence).ok());
+  EXPECT_THROW(RequireValidCase(root(), room_only), InputError);
 }
 
 TEST_F(CaseCheckTest, BadYamlKeyIsNamed) {
