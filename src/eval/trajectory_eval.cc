@@ -65,6 +65,11 @@ std::string TrajectoryEvaluation::ToText() const {
   if (unmatched_estimates > 0) {
     out << StringPrintf("estimates without ground truth (ignored): %d\n", unmatched_estimates);
   }
+  if (!has_errors()) {
+    out << "translation [mm]: mean (MTE) n/a (no estimate matched a ground-truth frame)\n"
+        << "rotation [deg]:   mean (MRE) n/a\n";
+    return out.str();
+  }
   out << StringPrintf("translation [mm]: mean (MTE) %.3f  median %.3f  p95 %.3f  max %.3f  rmse %.3f\n",
                       translation_mm.mean, translation_mm.median, translation_mm.p95,
                       translation_mm.max, translation_mm.rmse);
@@ -75,7 +80,8 @@ std::string TrajectoryEvaluation::ToText() const {
 }
 
 std::string TrajectoryEvaluation::ToJson(bool include_frames) const {
-  auto stats = [](const ErrorStats& s) {
+  auto stats = [this](const ErrorStats& s) {
+    if (!has_errors()) return std::string("null");
     return StringPrintf("{\"mean\": %.6f, \"median\": %.6f, \"p95\": %.6f, \"max\": %.6f, \"rmse\": %.6f}",
                         s.mean, s.median, s.p95, s.max, s.rmse);
   };

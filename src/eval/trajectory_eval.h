@@ -34,6 +34,10 @@ struct TrajectoryEvaluation {
   ErrorStats rotation_deg;    ///< MRE = rotation_deg.mean
   std::vector<FrameError> frames;
 
+  /// False when no estimate matched a ground-truth frame: then there are no
+  /// error figures (the stats are not zero errors), ToText says "n/a" and
+  /// ToJson gives null, and `arpos evaluate` exits non-zero.
+  bool has_errors() const { return estimated_frames > 0; }
   std::string ToText() const;
   std::string ToJson(bool include_frames = false) const;
 };

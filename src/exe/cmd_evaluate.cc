@@ -15,7 +15,8 @@ int RunEvaluateCommand(const std::vector<std::string>& argv) {
       "per frame E = T_gt^-1 T_est, translational error |t(E)| in mm and rotational\n"
       "error angle(R(E)) in degrees; mean (MTE/MRE), median, 95th percentile, max;\n"
       "ground-truth frames with no estimate within --max-dt (default 0.02 s) count as\n"
-      "lost. No trajectory alignment is applied.\n"
+      "lost. No trajectory alignment is applied. Exit status 1 when no estimate\n"
+      "matches a ground-truth frame (the figures are then n/a).\n"
       "  --json     machine-readable output\n"
       "  --frames   include per-frame errors (JSON) \n";
   const Args args(argv, {"gt", "est", "max-dt"}, {"json", "frames", "help"});
@@ -31,6 +32,14 @@ int RunEvaluateCommand(const std::vector<std::string>& argv) {
   if (!(max_dt > 0 && max_dt < 10)) ARPOS_INPUT_ERROR("--max-dt must be in (0, 10) seconds");
   const TrajectoryEvaluation eval = EvaluateTrajectory(gt, est, max_dt);
   std::cout << (args.Has("json") ? eval.ToJson(args.Has("frames")) : eval.ToText());
+  if (!eval.has_errors()) {
+    // 100 % lost is not a perfect result: no figures, and a failure status.
+    std::cerr << "arpos evaluate: no estimate in " << args.Require("est") << " ("
+              << est.size() << " poses) lies within " << max_dt << " s of a ground-truth frame of "
+              << args.Require("gt") << " (" << gt.size()
+              << " poses): every frame is lost, MTE/MRE n/a\n";
+    return 1;
+  }
   return 0;
 }
 

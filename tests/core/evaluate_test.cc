@@ -63,6 +63,23 @@ TEST(Evaluate, MissingEstimatesCountAsLost) {
   EXPECT_EQ(EvaluateTrajectory(sparse, late).estimated_frames, static_cast<int>(sparse.size()));
 }
 
+// Nothing matched is no result, not a perfect one: no figures, n/a.
+TEST(Evaluate, NothingMatchedHasNoErrorFigures) {
+  const auto gt = Trajectory(10);
+  for (const auto& est : {std::vector<StampedPose>{}, std::vector<StampedPose>{{1000.0, gt[0].room_from_x}}}) {
+    const auto eval = EvaluateTrajectory(gt, est);
+    EXPECT_FALSE(eval.has_errors());
+    EXPECT_EQ(eval.lost_frames, 10);
+    const std::string text = eval.ToText();
+    EXPECT_NE(text.find("mean (MTE) n/a"), std::string::npos) << text;
+    EXPECT_EQ(text.find("0.000"), std::string::npos) << text;
+    const std::string json = eval.ToJson();
+    EXPECT_NE(json.find("\"translation_mm\": null"), std::string::npos) << json;
+    EXPECT_NE(json.find("\"rotation_deg\": null"), std::string::npos) << json;
+  }
+  EXPECT_TRUE(EvaluateTrajectory(gt, gt).has_errors());
+}
+
 TEST(Evaluate, StatsOfKnownValues) {
   const ErrorStats s = ComputeErrorStats({4, 1, 3, 2});
   EXPECT_DOUBLE_EQ(s.mean, 2.5);
