@@ -5,6 +5,7 @@
 /// between steps. Run() is called on a worker thread by the GUI and on the
 /// main thread by the CLI; callbacks are invoked on the thread that runs it.
 
+#include <filesystem>
 #include <functional>
 #include <string>
 
@@ -26,6 +27,15 @@ class Cancelled : public Error {
  public:
   Cancelled() : Error("cancelled by the user") {}
 };
+
+/// Output checked before a stage runs, so that a command never computes (or
+/// stores) what it then cannot write. Creates `folder` if needed and writes
+/// and removes a probe file in it. Throws InputError naming `option` and the
+/// folder, e.g. "--out /data/out: folder not writable: /data/out (Permission denied)".
+void RequireWritableFolder(const std::filesystem::path& folder, const std::string& option);
+/// The same for the folder a file will be written to (which must exist);
+/// `file` itself must not be a folder.
+void RequireWritableFileLocation(const std::filesystem::path& file, const std::string& option);
 
 class Controller {
  public:

@@ -50,19 +50,9 @@ void RunCaseController::Run() {
   Step("checking the case folder", 0.0);
   CaseCheckOptions check_options;
   check_options.read_all_images = options_.read_all_images;
-  const CaseCheckReport report = CheckCase(options_.case_dir, check_options);
-  std::ostringstream errors;
-  for (const auto& p : report.problems) {
-    if (p.severity == CaseProblem::Severity::kError) {
-      errors << "\n  " << p.ToString();
-    } else {
-      result_.warnings.push_back(p.ToString());
-    }
-  }
-  if (!report.ok()) {
-    ARPOS_INPUT_ERROR(options_.case_dir.string() << ": the case has problems (arpos check lists them):"
-                                                 << errors.str());
-  }
+  const CaseCheckReport report = RequireValidCase(options_.case_dir, check_options);
+  for (const auto& p : report.problems) result_.warnings.push_back(p.ToString());
+  if (options_.out_dir) RequireWritableFolder(*options_.out_dir, "--out");
   result_.stages_done.push_back("check");
 
   Step("importing the reference model", 0.1);

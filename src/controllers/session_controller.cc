@@ -15,6 +15,7 @@
 #include "registration/registration.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
+#include "sensor/case_check.h"
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
@@ -261,6 +262,13 @@ void SessionController::Run() {
   ARPOS_CHECK(database_ != nullptr, "the session stage needs a session store");
   result_ = SessionStageResult();
   const auto start = Clock::now();
+  // What the stage reads, checked as `arpos check` does (quick: a sample of
+  // the images), and where it writes, before any work.
+  CaseCheckOptions check;
+  check.read_all_images = false;
+  check.sequences = std::vector<std::filesystem::path>{"body_scan"};
+  RequireValidCase(options_.case_dir, check);
+  if (options_.out_dir) RequireWritableFolder(*options_.out_dir, "--out");
 
   Step("loading the case and the plan", 0.0);
   const CaseFolder folder = LoadCaseFolder(options_.case_dir);
@@ -276,6 +284,13 @@ void SessionController::Run() {
   }
   result_.plan_id = plan_id;
   const TriangleMesh model = FromStoredMesh(plan->reference_model);
+  // A plan stored before these checks existed may hold what they refuse.
+  for (const std::string& problem : {ReferenceModelSizeProblem(model),
+                                     TargetPoseProblem(plan->room_from_model_target.ToMatrix())}) {
+    if (!problem.empty()) {
+      ARPOS_INPUT_ERROR("plan " << plan_id.value() << " (" << plan->reference_model_name << "): " << problem);
+    }
+  }
   const Sequence scan = Sequence::Open(folder.body_scan_dir);
   result_.frames = static_cast<int>(scan.size());
 
@@ -644,6 +659,18 @@ void SessionController::Run() {
     result_.model_from_markers[m.marker_id] = result_.room_from_model.Inverse() * m.room_from_marker;
   }
 
+  // Outputs first: a failed write must not leave a stored session behind, and
+  // a store that stays locked must not lose the finished work.
+  if (options_.out_dir) {
+    std::vector<StampedPose> model_poses;
+    for (size_t i = 0; i < scan.size(); ++i) model_poses.push_back({scan.timestamp_s(i), result_.room_from_model});
+    WriteTrajectory(*options_.out_dir / "model_pose.txt", model_poses,
+                    "reference model -> room at body-scan time (arpos session)");
+    WriteTrajectory(*options_.out_dir / "camera_pose.txt", camera_poses,
+                    "camera -> room, body-scan frames used (arpos session)");
+    if (!mesh.mesh.empty()) SaveTriangleMeshPly(mesh.mesh, *options_.out_dir / "reconstruction_mesh.ply");
+  }
+
   // Store everything in one transaction.
   Step("storing the session", 0.95);
   t0 = Clock::now();
@@ -724,17 +751,6 @@ void SessionController::Run() {
                                 StringPrintf(", rmse %.2f mm", 1000 * refined.rmse_m)});
   });
   result_.times.store_s = SecondsSince(t0);
-
-  if (options_.out_dir) {
-    CreateDirectories(*options_.out_dir);
-    std::vector<StampedPose> model_poses;
-    for (size_t i = 0; i < scan.size(); ++i) model_poses.push_back({scan.timestamp_s(i), result_.room_from_model});
-    WriteTrajectory(*options_.out_dir / "model_pose.txt", model_poses,
-                    "reference model -> room at body-scan time (arpos session)");
-    WriteTrajectory(*options_.out_dir / "camera_pose.txt", camera_poses,
-                    "camera -> room, body-scan frames used (arpos session)");
-    if (!mesh.mesh.empty()) SaveTriangleMeshPly(mesh.mesh, *options_.out_dir / "reconstruction_mesh.ply");
-  }
   result_.times.total_s = SecondsSince(start);
   Step("done", 1.0);
 }

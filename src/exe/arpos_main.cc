@@ -12,6 +12,7 @@
 
 #ifdef ARPOS_HAVE_STORE
 #include "exe/cmd_store.h"
+#include "store/database.h"
 #endif
 #ifdef ARPOS_HAVE_SIMULATE
 #include "exe/cmd_simulate.h"
@@ -112,6 +113,13 @@ int main(int argc, char** argv) {
     } catch (const arpos::InputError& e) {
       std::cerr << "arpos " << name << ": error: " << e.what() << std::endl;
       return 2;
+#ifdef ARPOS_HAVE_STORE
+    } catch (const arpos::StoreAccessError& e) {
+      // The store file or its folder, not the program: the message says which
+      // and what to do.
+      std::cerr << "arpos " << name << ": store error: " << e.what() << std::endl;
+      return 2;
+#endif
     } catch (const std::exception& e) {
       std::cerr << "arpos " << name << ": internal error: " << e.what() << std::endl;
       return 3;

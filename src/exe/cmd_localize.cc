@@ -7,6 +7,7 @@
 #include "exe/args.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
+#include "sensor/case_check.h"
 #include "sensor/case_config.h"
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
@@ -53,6 +54,16 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
       ARPOS_INPUT_ERROR(seq_dir.string() << ": no case.yaml in this folder or above it; give --case DIR");
     }
   }
+  // What localisation reads (case.yaml, the sequence), checked as `arpos check`
+  // does (quick), and where it writes, before any work.
+  CaseCheckOptions check;
+  check.read_all_images = false;
+  check.reference_model = false;
+  check.target_pose = false;
+  check.sequences = std::vector<std::filesystem::path>{std::filesystem::absolute(seq_dir)};
+  RequireValidCase(*case_root, check);
+  RequireWritableFileLocation(out_path, "--out");
+  if (args.Has("timings")) RequireWritableFileLocation(args.Require("timings"), "--timings");
   const CaseConfig config = LoadCaseConfig(*case_root / "case.yaml");
   std::optional<PlanId> plan;
   if (args.Has("plan")) {

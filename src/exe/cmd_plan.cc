@@ -53,6 +53,8 @@ int RunPlanCommand(const std::vector<std::string>& argv) {
   const std::string problem = options.Check();
   if (!problem.empty()) ARPOS_INPUT_ERROR(problem);
 
+  if (args.Has("poses")) RequireWritableFileLocation(args.Require("poses"), "--poses");
+
   const std::string store_path = args.GetOr("store", DefaultStorePath());
   auto database = SqliteDatabase::Open(store_path);
   int last_percent = -1;

@@ -74,6 +74,9 @@ int RunStoreCommandWithOutput(const std::vector<std::string>& args, std::ostream
   } catch (const InputError& e) {
     err << "arpos store " << args[0] << ": error: " << e.what() << "\n";
     return 2;
+  } catch (const StoreAccessError& e) {
+    err << "arpos store " << args[0] << ": store error: " << e.what() << "\n";
+    return 2;
   } catch (const std::exception& e) {
     err << "arpos store " << args[0] << ": error: " << e.what() << "\n";
     return 1;

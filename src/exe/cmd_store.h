@@ -18,7 +18,8 @@ namespace arpos {
 /// `args` are the words after `arpos store` (e.g. {"info", "--store", "a.db"}).
 /// Prints results to stdout, errors to stderr. Returns 0 on success, 2 on a
 /// usage or input error (bad arguments, no store at the path, a store newer
-/// than this program, not an ARPos store), 1 if the store could not be read.
+/// than this program, not an ARPos store, a problem of the file such as a
+/// read-only file or folder: StoreAccessError), 1 if the store could not be read.
 int RunStoreCommand(const std::vector<std::string>& args);
 
 /// The same, writing to the given streams (for tests). A separate name, so

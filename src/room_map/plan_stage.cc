@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "geometry/mesh_io.h"
+#include "sensor/case_check.h"
 #include "sensor/sequence.h"
 #include "store/record_conversions.h"
 #include "util/check.h"
@@ -104,6 +105,12 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
   const std::string problem = options.Check();
   if (!problem.empty()) ARPOS_INPUT_ERROR("plan: " << problem);
   if (callbacks.progress) callbacks.progress("reading the case", 0.0);
+  // What planning reads, checked as `arpos check` does (quick: a sample of the
+  // images), before anything is stored.
+  CaseCheckOptions check;
+  check.read_all_images = false;
+  check.sequences = std::vector<std::filesystem::path>{"room"};
+  RequireValidCase(options.case_dir, check);
   const CaseFolder folder = LoadCaseFolder(options.case_dir);
   const std::string patient_name =
       options.patient_external_id.empty() ? CasePatientId(folder.root) : options.patient_external_id;

@@ -1,10 +1,9 @@
 // Runs the real `arpos` executable as a user would.
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
-#include <array>
 #include <cstdio>
 
+#include "cli/cli_util.h"
 #include "sensor/test_case_builder.h"
 #include "sensor/tum_io.h"
 #include "util/file.h"
@@ -12,23 +11,8 @@
 namespace arpos {
 namespace {
 
-struct Result {
-  int status = -1;
-  std::string output;  // stdout and stderr
-};
-
-Result RunArpos(const std::string& args) {
-  const std::string command = std::string(ARPOS_EXECUTABLE) + " " + args + " 2>&1";
-  Result result;
-  FILE* pipe = popen(command.c_str(), "r");
-  if (!pipe) return result;
-  std::array<char, 4096> buffer;
-  size_t n;
-  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) result.output.append(buffer.data(), n);
-  const int status = pclose(pipe);
-  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return result;
-}
+using Result = testing::CliResult;
+using testing::RunArpos;
 
 TEST(Cli, HelpListsSubcommands) {
   const Result r = RunArpos("--help");
