@@ -16,6 +16,7 @@
 #include "geometry/mesh_io.h"
 #include "geometry/pose_error.h"
 #include "registration/reconstruction.h"
+#include "room_map/plan_stage.h"
 #include "simulation/simulation_truth.h"
 #include "simulation/simulator.h"
 #include "sensor/tum_io.h"
@@ -338,6 +339,41 @@ TEST(SessionStage, ManualAlignmentFromPickedPairsIsRefinedAndStored) {
   wrong[2] += Eigen::Vector3d(0.3, 0, 0);
   EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], on_model, wrong, "test"), InputError);
   EXPECT_EQ(db->ListAlignments(reconstructions[0]).size(), stored_before + 2);
+}
+
+// A plan stored before the input checks existed, with its reference model in
+// millimetres: the session stage refuses it before any work (it used to run
+// out of memory on a kilometre-sized crop box), naming the plan and the
+// likely unit, and stores nothing.
+TEST(SessionStage, AStoredPlanWithAModelInMillimetresIsRefusedBeforeTheStage) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  PlanRoomMapOptions plan_options;
+  plan_options.case_dir = case_dir;
+  const PlanRoomMapResult planned = RunPlanRoomMap(plan_options, db.get());
+  PlanRecord scaled = *db->GetPlan(planned.plan_id);
+  for (auto& v : scaled.reference_model.vertices) v *= 1000.0f;
+  scaled.name = "model in millimetres";
+  const PlanId bad_plan = db->AddPlan(scaled);
+  RoomMapRecord map = *db->GetRoomMap(planned.room_map_id);
+  map.plan_id = bad_plan;
+  db->AddRoomMap(map);
+  SessionStageOptions session;
+  session.case_dir = case_dir;
+  session.plan_id = bad_plan;
+  SessionController controller(session, db.get());
+  try {
+    controller.Run();
+    FAIL() << "a plan with a model in millimetres was used";
+  } catch (const InputError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("plan " + std::to_string(bad_plan.value()) + " (reference_model.ply): largest extent is"),
+              std::string::npos)
+        << message;
+    EXPECT_NE(message.find("looks like millimetres"), std::string::npos) << message;
+  }
+  EXPECT_TRUE(db->ListSessions().empty());
 }
 
 }  // namespace
