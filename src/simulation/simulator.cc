@@ -717,7 +717,7 @@ SimulationTruth Simulator::Truth() const {
   t.sensor = profile_.Describe();
   t.noise = options_.noise;
   t.hard = options_.hard;
-  t.room_walk = options_.room_walk;
+  t.room_walk = random_conditions_ ? conditions_.room_walk : options_.room_walk;
   t.room_frames = options_.room_frames;
   t.body_scan_frames = options_.body_scan_frames;
   t.tracking_frames = options_.tracking_frames;
