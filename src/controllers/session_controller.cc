@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "features/response_from_recording.h"
 #include "geometry/mesh_io.h"
 #include "geometry/so3.h"
 #include "geometry/umeyama.h"
@@ -121,6 +122,7 @@ std::string SessionStageResult::Summary() const {
   out << StringPrintf(
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
       "map, %d more posed from the stickers\n"
+      "%s\n"
       "body marker map: %zu stickers (mean corner rms %.3f px), %zu left out; %s\n"
       "reconstruction: %d points from %d of %d frames%s (mean frame correction %.2f mm, %.3f deg "
       "taken off), mesh %d vertices\n"
@@ -129,7 +131,8 @@ std::string SessionStageResult::Summary() const {
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
       "%.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
-      frames, frames_considered, frames_localized, frames_posed_by_stickers, marker_map.markers.size(), marker_map.mean_rms_px,
+      frames, frames_considered, frames_localized, frames_posed_by_stickers, camera_response.c_str(),
+      marker_map.markers.size(), marker_map.mean_rms_px,
       marker_map.rejected.size(),
       stickers_on_surface
           ? StringPrintf("placed from %d frames registered to the reconstruction", frames_registered_for_stickers).c_str()
@@ -296,12 +299,19 @@ void SessionController::Run() {
 
   // 1-3. Localise, collect sticker views, fuse depth.
   Step("localising the body scan", 0.05);
-  CameraLocalizer localizer(room_map, camera, MakeCameraLocalizerOptions(folder.config));
+  // The scan's camera response from its own markers (room markers and
+  // stickers), else the room recording's.
+  const RecordingResponse response =
+      EstimateRecordingResponse(scan, folder.config, room_map.camera_response);
+  result_.camera_response = response.message;
+  CameraLocalizerOptions localizer_options = MakeCameraLocalizerOptions(folder.config);
+  localizer_options.detector.edge.response = response.response;
+  CameraLocalizer localizer(room_map, camera, localizer_options);
   MarkerDetectorOptions detector_options;
   detector_options.dictionary = folder.config.dictionary;
   detector_options.id_ranges = {{folder.config.body_markers.id_min, folder.config.body_markers.id_max}};
   detector_options.intrinsics = camera;
-  detector_options.edge.input_srgb = true;  // colour cameras deliver sRGB-encoded images
+  detector_options.edge.response = response.response;
   MarkerDetector detector(detector_options);
 
   ReconstructionOptions recon_options;

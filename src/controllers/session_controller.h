@@ -114,6 +114,8 @@ struct SessionStageResult {
   int frames_localized = 0;   ///< in the room map
   /// Frames the room map could not localise, posed from mapped stickers.
   int frames_posed_by_stickers = 0;
+  /// How the scan's camera response was found (estimated, or assumed).
+  std::string camera_response;
   BodyMarkerMapResult marker_map;
   /// Every considered frame that got a final pose, in scan order.
   std::vector<ScanCameraPose> scan_cameras;

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "exe/args.h"
+#include "features/response_from_recording.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
 #include "sensor/case_check.h"
@@ -88,6 +89,10 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
   CameraLocalizerOptions options = MakeCameraLocalizerOptions(config);
   options.use_keypoints = !args.Has("no-keypoints");
   options.use_markers = !args.Has("no-markers");
+  // The recording's camera response from its own markers, else the room's.
+  const RecordingResponse response = EstimateRecordingResponse(sequence, config, map.camera_response);
+  options.detector.edge.response = response.response;
+  std::cerr << response.message << "\n";
   std::string problem;
   if (!options.Check(&problem)) ARPOS_INPUT_ERROR(problem);
   CameraLocalizer localizer(std::move(map), config.camera, options);

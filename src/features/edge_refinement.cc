@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "features/edge_profile.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -12,8 +13,8 @@ namespace arpos {
 
 namespace {
 
-constexpr double kInvSqrt2Pi = 0.3989422804014327;
-constexpr double kInvSqrt2 = 0.7071067811865476;
+using edge_profile::EdgeProfile;
+using edge_profile::Profile;
 
 // Parameters of one marker fit: per edge k (dtheta, rho, sigma) at 3k..3k+2,
 // then the illumination: black level k0 + kx x + ky y and white level
@@ -28,19 +29,6 @@ constexpr double kMinSigma = 0.02;                  // px; a perfectly sharp ren
 
 using VecP = Eigen::Matrix<double, kNumParams, 1>;
 using MatP = Eigen::Matrix<double, kNumParams, kNumParams>;
-
-/// Standard normal CDF and PDF sharing one exp(). The CDF uses Abramowitz &
-/// Stegun 7.1.26 (|error| < 8e-8), ~3x cheaper than std::erf.
-inline void NormalCdfPdf(double u, double* cdf, double* pdf) {
-  const double e = std::exp(-0.5 * u * u);
-  *pdf = kInvSqrt2Pi * e;
-  const double t = 1.0 / (1.0 + 0.3275911 * kInvSqrt2 * std::abs(u));
-  const double poly =
-      t *
-      (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
-  const double tail = 0.5 * poly * e;  // Phi(-|u|)
-  *cdf = u >= 0 ? 1.0 - tail : tail;
-}
 
 /// Line n . p = offset with unit n; signed distance n . p - offset.
 struct Line2 {
@@ -122,35 +110,6 @@ struct SegmentCheck {
   bool inlier = true;
 };
 
-struct Profile {
-  double value;  // fraction of the way from black to white, in [0, 1]
-  double d_dist;
-  double d_sigma;
-};
-
-/// Edge profile of a pixel whose centre is at signed distance d from the edge:
-/// the unit step convolved with a Gaussian (sigma) and with the pixel's
-/// square footprint as seen along the edge normal n. That footprint is a
-/// trapezoid (boxes of widths |n_x| and |n_y| convolved); it is modelled as
-/// the wider box, exactly, with the narrower box's variance (b^2 / 12) added
-/// to the Gaussian. Exact for axis-aligned edges, where the plain erf would
-/// be biased on sharp images (one transition pixel per column, fixed phase);
-/// on oblique edges the sub-pixel phase varies along the edge and the small
-/// shape difference averages out.
-inline Profile EdgeProfile(double d, double sigma, double inv_s, double s, double half_a,
-                           double inv_a) {
-  double cdf0, pdf0, cdf1, pdf1;
-  const double x0 = (d + half_a) * inv_s, x1 = (d - half_a) * inv_s;
-  NormalCdfPdf(x0, &cdf0, &pdf0);
-  NormalCdfPdf(x1, &cdf1, &pdf1);
-  // value = (s / a) [G1(x0) - G1(x1)] with G1(x) = x Phi(x) + phi(x).
-  Profile p;
-  p.value = s * inv_a * (x0 * cdf0 + pdf0 - x1 * cdf1 - pdf1);
-  p.d_dist = inv_a * (cdf0 - cdf1);
-  p.d_sigma = inv_a * (pdf0 - pdf1) * sigma * inv_s;  // d value/d s * d s/d sigma
-  return p;
-}
-
 /// Per-edge constants of one model evaluation pass.
 struct EdgeConst {
   double cos_t, sin_t;
@@ -205,8 +164,6 @@ struct FitOutcome {
 }  // namespace
 
 struct EdgeRefinementWorkspace::Impl {
-  std::array<double, 256> grey_lut{};  // linearised grey values for lut_key
-  double lut_key = 0;                  // input_gamma, or -1 for sRGB
   std::array<std::vector<BandPixel>, 4> bands;
   std::vector<double> scratch;
   std::array<std::vector<SegmentCheck>, 4> segments;
@@ -580,9 +537,6 @@ std::string EdgeRefinementOptions::Validate() const {
     return StringPrintf("border_bits must be in 1..4, got %d", border_bits);
   }
   if (!(quiet_zone_cells > 0)) return "quiet_zone_cells must be positive";
-  if (!(input_gamma >= 0.2 && input_gamma <= 5.0)) {
-    return StringPrintf("input_gamma must be in [0.2, 5], got %g", input_gamma);
-  }
   if (!(band_half_width_px >= 1.0 && band_half_width_px <= 10.0)) {
     return StringPrintf("band_half_width_px must be in [1, 10], got %g", band_half_width_px);
   }
@@ -677,18 +631,6 @@ CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
   std::string reason;
   ARPOS_CHECK(options.Check(&reason), "invalid EdgeRefinementOptions: " << reason);
   EdgeRefinementWorkspace::Impl& ws = workspace->impl();
-  const double lut_key = options.input_srgb ? -1.0 : options.input_gamma;
-  if (ws.lut_key != lut_key) {
-    for (int v = 0; v < 256; ++v) {
-      const double c = v / 255.0;
-      const double lin = options.input_srgb
-                             ? (c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4))
-                             : std::pow(c, options.input_gamma);
-      ws.grey_lut[v] = 255.0 * lin;
-    }
-    ws.lut_key = lut_key;
-  }
-
   CornerRefinementResult result;
   result.corners_px = initial_px;
   auto fail = [&](const std::string& why) {
@@ -734,7 +676,7 @@ CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
     const Geoms previous = geoms;
     for (int k = 0; k < 4; ++k) {
       CollectBand(gray, quad, square_to_image, k, options, undistorter, level_origin, level_scale,
-                  ws.grey_lut, &geoms[k], &ws.bands[k], &num_segments[k]);
+                  options.response.linear_from_code(), &geoms[k], &ws.bands[k], &num_segments[k]);
       if (static_cast<int>(ws.bands[k].size()) < options.min_pixels_per_edge) {
         return fail(StringPrintf("edge %d: only %d pixels in its band", k,
                                  static_cast<int>(ws.bands[k].size())));

@@ -43,14 +43,15 @@
 /// are distorted back, so inputs and outputs stay in the given image's pixels.
 /// (Our cases have zero distortion; the mapping then is the identity and free.)
 ///
-/// Camera response: the model is linear in scene radiance. A gamma-encoded
+/// Camera response: the model is linear in scene radiance. A tone-curved
 /// image (sRGB-like, as most colour cameras deliver) moves the apparent 50 %
-/// point of a blurred edge towards the dark side, i.e. shrinks the marker by a
+/// point of a blurred edge towards one side, i.e. scales the marker by a
 /// fraction of the blur: ~0.6-0.8 px at 1 px blur for a 2.2 gamma, a 2-3 %
-/// scale error (features_bench --report). Set `input_gamma` (e.g. 2.2) to
-/// linearise grey values before fitting; the camera's response must then be
-/// known (fitting it per marker from the edges' asymmetry was tried: too
-/// poorly determined to be useful).
+/// scale error (features_bench --report). `response` linearises the codes
+/// first; it is estimated per recording from the markers' cell widths
+/// (camera_response.h). Fitting it from the edges' asymmetry was tried, per
+/// marker and pooled over a recording: the profile's shape leaves it too
+/// poorly determined.
 ///
 /// Not modelled: printer ink spread (prints the black square slightly large or
 /// small: calibrate the printed size instead) and non-planar (curved) markers.
@@ -63,6 +64,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "features/camera_response.h"
 #include "features/marker_observation.h"
 #include "sensor/intrinsics.h"
 
@@ -76,13 +78,9 @@ struct EdgeRefinementOptions {
   /// guaranteed on the print. The band never samples beyond it.
   double quiet_zone_cells = 1.0;
 
-  /// Grey values are linearised as 255 * (v / 255)^input_gamma before
-  /// fitting; 1 = the image is linear in radiance (no change).
-  double input_gamma = 1.0;
-  /// Linearise with the sRGB transfer curve instead (overrides input_gamma).
-  /// Equivalent to detecting on an sRGB-linearised image, without
-  /// re-quantising the dark levels to 8 bits.
-  bool input_srgb = false;
+  /// The camera's response (camera_response.h): codes are read through it
+  /// as linear values before fitting. Default: linear (codes unchanged).
+  CameraResponse response;
 
   /// Half-width of the band fitted across each edge (px).
   double band_half_width_px = 3.0;

@@ -13,7 +13,6 @@
 
 #include "geometry/so3.h"
 #include "room_map/bundle_adjustment.h"
-#include "room_map/camera_response.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -103,7 +102,6 @@ struct CameraLocalizer::Impl {
 
   // Per-frame scratch.
   cv::Mat gray;
-  cv::Mat marker_image;  // gray, linearised if asked
   KeypointSet keypoints;
   std::vector<Eigen::Vector2d> keypoint_px;  // ideal pixels
   std::vector<MarkerObservation> markers;    // map markers in this frame (image pixels)
@@ -169,7 +167,7 @@ struct CameraLocalizer::Impl {
   }
 
   void DetectFull() {
-    detector->Detect(marker_image, &scratch);
+    detector->Detect(gray, &scratch);
     for (const auto& o : scratch) AcceptMarker(o);
   }
 
@@ -207,7 +205,7 @@ struct CameraLocalizer::Impl {
       bool found = false;
       for (const auto& already : markers) found |= already.id == m.id;
       if (found) continue;
-      detector->Detect(marker_image(cv::Rect(x0, y0, x1 - x0, y1 - y0)), &scratch);
+      detector->Detect(gray(cv::Rect(x0, y0, x1 - x0, y1 - y0)), &scratch);
       for (auto o : scratch) {
         for (int c = 0; c < 4; ++c) {
           o.corners_px[c] += Eigen::Vector2d(x0, y0);
@@ -542,13 +540,6 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   Lap(&mark, &tm.keypoints_ms);
 
   const std::optional<Rigid3d> predicted = m.Predict(frame.timestamp_s);
-  if (options_.use_markers && !given) {
-    if (options_.linearize_srgb) {
-      LinearizeSrgb(m.gray, &m.marker_image);
-    } else {
-      m.marker_image = m.gray;
-    }
-  }
   m.markers.clear();
   m.marker_px.clear();
   m.marker_depth.clear();

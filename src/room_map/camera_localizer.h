@@ -51,8 +51,6 @@ struct CameraLocalizerOptions {
   KeypointOptions keypoints;
   PoseRefinerOptions refiner;
 
-  /// Inverse sRGB curve before marker detection (camera_response.h).
-  bool linearize_srgb = true;
   bool use_markers = true;
   bool use_keypoints = true;
   /// Search markers only around their predicted corners while tracking
@@ -216,8 +214,8 @@ class CameraLocalizer {
   /// Same, with room-marker detections made by the caller on this frame
   /// (image pixels, any ids: those not in the map are ignored). Skips the
   /// localiser's own marker detection. For accurate corners the caller's
-  /// detector should run on the sRGB-linearised grey image (LinearizeSrgb,
-  /// camera_response.h), as the localiser's own detection does.
+  /// detector should refine under the recording's camera response
+  /// (options.detector.edge.response), as the localiser's own detection does.
   LocalizationResult Localize(const RgbdFrame& frame,
                               const std::vector<MarkerObservation>& detections);
 

@@ -25,6 +25,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "features/camera_response.h"
 #include "features/marker_observation.h"
 #include "geometry/rigid3.h"
 #include "store/records.h"
@@ -52,6 +53,10 @@ struct RoomMap {
   cv::Mat landmark_descriptors;
   double mean_residual_px = 0;  ///< marker corners, over all markers and views
   double max_residual_px = 0;   ///< largest per-marker residual
+  /// The response of the camera that recorded the room (estimated from its
+  /// markers, else assumed): the fallback for later recordings whose own
+  /// markers cannot tell.
+  CameraResponse camera_response = CameraResponse::Srgb();
 
   /// The marker with this id, or nullptr.
   const RoomMapMarkerEntry* FindMarker(int id) const;

@@ -15,7 +15,6 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "room_map/camera_response.h"
 #include "room_map/marker_graph.h"
 #include "room_map/pose_refiner.h"
 #include "util/check.h"
@@ -116,6 +115,7 @@ RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseConfig& config) {
   options.detector.dictionary = config.dictionary;
   options.detector.id_ranges = {{config.room_markers.id_min, config.room_markers.id_max}};
   options.detector.intrinsics = config.camera;
+  options.detector.edge.response = CameraResponse::Srgb();  // when the recording cannot tell
   options.keypoints.max_keypoints = 1000;
   return options;
 }
@@ -147,6 +147,7 @@ std::string RoomMapBuildReport::ToText() const {
                       joint_adjustment.iterations, joint_adjustment.seconds);
   out << StringPrintf("time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, adjustment %.2f s, total %.2f s\n",
                       frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
+  if (!camera_response.empty()) out << camera_response << "\n";
   for (const auto& w : warnings) out << "warning: " << w << "\n";
   return out.str();
 }
@@ -176,6 +177,21 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   }
   report.frames_total = static_cast<int>(indices.size());
   if (indices.empty()) ARPOS_INPUT_ERROR(sequence.folder().string() << ": the room sequence has no frames");
+  // The camera response, from the recording's own markers.
+  MarkerDetectorOptions detector_options = options.detector;
+  result.map.camera_response = options.detector.edge.response;
+  if (options.estimate_response) {
+    progress("estimating the camera response", 0.0);
+    const RecordingResponse rr = EstimateRecordingResponse(sequence, K, options.detector,
+                                                           options.detector.edge.response,
+                                                           options.response);
+    detector_options.edge.response = rr.response;
+    result.map.camera_response = rr.response;
+    report.camera_response = rr.message;
+  } else {
+    report.camera_response = "camera response assumed: " + options.detector.edge.response.name();
+  }
+
   std::vector<FrameData> frames(indices.size());
   {
     progress("detecting markers and keypoints", 0.0);
@@ -185,9 +201,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     std::mutex error_mutex;
     auto worker = [&]() {
       try {
-        MarkerDetector detector(options.detector);
+        MarkerDetector detector(detector_options);
         KeypointExtractor extractor(options.keypoints);
-        cv::Mat gray, linear;
+        cv::Mat gray;
         std::vector<MarkerObservation> detected;
         while (!stop) {
           const int slot = next++;
@@ -196,12 +212,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
           f.index = indices[slot];
           const RgbdFrame frame = sequence.LoadFrame(f.index, K);
           cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
-          if (options.linearize_srgb) {
-            LinearizeSrgb(gray, &linear);
-            detector.Detect(linear, &detected);
-          } else {
-            detector.Detect(gray, &detected);
-          }
+          detector.Detect(gray, &detected);
           for (const auto& obs : detected) {
             f.all_ids_seen.push_back(obs.id);
             if (!obs.IsPrecise()) continue;

@@ -29,6 +29,7 @@
 #include "controllers/controller.h"
 #include "features/marker_detector.h"
 #include "features/marker_pose.h"
+#include "features/response_from_recording.h"
 #include "room_map/bundle_adjustment.h"
 #include "room_map/keypoints.h"
 #include "room_map/room_map.h"
@@ -64,9 +65,11 @@ struct RoomMapBuildOptions {
   KeypointOptions keypoints;
   BaOptions bundle_adjustment;
 
-  /// Map grey values through the inverse sRGB curve before marker detection
-  /// (camera_response.h); off only for cameras with a linear response.
-  bool linearize_srgb = true;
+  /// Estimate the camera's response from the room sequence's markers
+  /// (features/response_from_recording.h) and refine corners under it; when
+  /// the data cannot tell, or when off, `detector.edge.response` is used.
+  bool estimate_response = true;
+  RecordingResponseOptions response;
   int frame_step = 1;   ///< use every n-th frame
   int max_frames = 0;   ///< 0 = all
   int threads = 2;      ///< frame processing and Ceres
@@ -134,6 +137,8 @@ struct RoomMapBuildReport {
   BaSummary joint_adjustment;
   double frames_s = 0, initialisation_s = 0, landmarks_s = 0, adjustment_s = 0, total_s = 0;
   std::vector<std::string> warnings;
+  /// How the camera response was found (estimated, or assumed and why).
+  std::string camera_response;
   /// Camera poses of the used frames (sequence index, room_from_camera).
   std::vector<std::pair<int, Rigid3d>> room_from_camera;
 

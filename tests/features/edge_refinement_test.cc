@@ -218,7 +218,7 @@ TEST(EdgeRefinement, GammaEncodedImagesNeedLinearising) {
     const auto start = Perturbed(m.truth.corners_px, 0.5, seed);
     EdgeRefinementOptions options;
     const CornerRefinementResult raw = RefineMarkerCorners(m.image, start, options);
-    options.input_gamma = 2.2;
+    options.response = CameraResponse::Gamma(2.2);
     const CornerRefinementResult lin = RefineMarkerCorners(m.image, start, options);
     ASSERT_EQ(lin.status, MarkerStatus::kRefined);
     for (int k = 0; k < 4; ++k) {

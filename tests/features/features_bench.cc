@@ -113,8 +113,8 @@ void RunReport(bool quick) {
           s.rotation_median_deg, r.total_time_ms / r.num_images);
     };
     MarkerDetectorOptions linearised;
-    linearised.edge.input_gamma = 2.2;
-    row("edge lines, input_gamma 2.2", linearised, images);
+    linearised.edge.response = CameraResponse::Gamma(2.2);
+    row("edge lines, response gamma 2.2", linearised, images);
     std::printf("\nThe same scenes with a linear camera (blur 1.0 px):\n\n");
     RenderOptions linear;
     linear.blur_sigma_px = 1.0;

@@ -125,8 +125,33 @@ cv::Mat RenderMarkers(const CameraIntrinsics& camera, const std::vector<MarkerPl
     image.setTo(options.background_grey);
   }
   const double gamma = options.gamma;
-  auto to_linear = [gamma](double v) { return 255.0 * std::pow(std::max(0.0, v) / 255.0, gamma); };
-  if (gamma != 1.0) {
+  const std::function<double(double)> encode_fraction =
+      options.encode ? options.encode
+                     : std::function<double(double)>([gamma](double x) { return std::pow(x, 1.0 / gamma); });
+  const bool identity = !options.encode && gamma == 1.0;
+  // Encoded grey -> linear: closed form for a gamma, else a fine table of the
+  // inverse of `encode` (found by bisection), interpolated.
+  std::vector<double> decode_table;
+  if (options.encode) {
+    decode_table.resize(4097);
+    for (size_t i = 0; i < decode_table.size(); ++i) {
+      const double target = static_cast<double>(i) / (decode_table.size() - 1);
+      double lo = 0, hi = 1;
+      for (int it = 0; it < 50; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        (encode_fraction(mid) < target ? lo : hi) = mid;
+      }
+      decode_table[i] = 0.5 * (lo + hi);
+    }
+  }
+  auto to_linear = [&](double v) {
+    if (!options.encode) return 255.0 * std::pow(std::max(0.0, v) / 255.0, gamma);
+    const double u = std::clamp(v / 255.0, 0.0, 1.0) * (decode_table.size() - 1);
+    const size_t i = std::min(decode_table.size() - 2, static_cast<size_t>(u));
+    const double f = u - i;
+    return 255.0 * (decode_table[i] * (1 - f) + decode_table[i + 1] * f);
+  };
+  if (!identity) {
     for (auto it = image.begin<double>(); it != image.end<double>(); ++it) *it = to_linear(*it);
   }
 
@@ -258,7 +283,7 @@ cv::Mat RenderMarkers(const CameraIntrinsics& camera, const std::vector<MarkerPl
     uchar* dst = out.ptr<uchar>(j);
     for (int i = 0; i < size.width; ++i) {
       const double encoded =
-          gamma == 1.0 ? src[i] : 255.0 * std::pow(std::max(0.0, src[i]) / 255.0, 1.0 / gamma);
+          identity ? src[i] : 255.0 * encode_fraction(std::clamp(src[i] / 255.0, 0.0, 1.0));
       const double v = encoded + (options.noise_sigma_grey > 0 ? noise(*rng) : 0.0);
       dst[i] = static_cast<uchar>(std::clamp(std::lround(v), 0L, 255L));
     }

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <functional>
 #include <random>
 #include <vector>
 
@@ -53,6 +54,9 @@ struct RenderOptions {
   /// image) is composed and blurred in linear radiance, then encoded with
   /// this gamma (1 = linear camera; ~2.2 for sRGB-like colour cameras).
   double gamma = 1.0;
+  /// Any other tone curve: linear fraction (0..1) -> encoded fraction (0..1),
+  /// monotone increasing; overrides `gamma` when set.
+  std::function<double(double)> encode;
 };
 
 /// Renders `markers` into a CV_8UC1 image of the camera's size. `truth` gets

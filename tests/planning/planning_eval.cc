@@ -3,7 +3,7 @@
 //
 //   planning_eval CASE_DIR [--store DB] [--only SEQ] [--frame-step N] [--no-keypoints]
 //                 [--loc-no-keypoints] [--no-marker-depth] [--no-keypoint-depth]
-//                 [--no-linearize] [--corner-sigma PX] [--prior-m M] [--prior-deg D]
+//                 [--response NAME|estimate] [--corner-sigma PX] [--prior-m M] [--prior-deg D]
 //                 [--kp-sigma PX] [--min-kp N] [--depth-const M] [--depth-quad M]
 //
 // --store DB uses the newest room map in DB instead of building one.
@@ -27,6 +27,7 @@
 #include <opencv2/core.hpp>
 
 #include "eval/trajectory_eval.h"
+#include "features/response_from_recording.h"
 #include "geometry/umeyama.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
@@ -47,7 +48,8 @@ int main(int argc, char** argv) {
   try {
     const std::filesystem::path case_dir = argv[1];
     RoomMapStageOptions stage;
-    bool loc_keypoints = true, marker_depth = true, keypoint_depth = true, linearize = true;
+    bool loc_keypoints = true, marker_depth = true, keypoint_depth = true;
+    std::string response = "estimate";
     double corner_sigma = -1, prior_m = -1, prior_deg = -1, kp_sigma = -1;
     int min_kp = -1;
     double depth_quad = -1, depth_const = -1;
@@ -55,7 +57,7 @@ int main(int argc, char** argv) {
     for (int i = 2; i < argc; ++i) {
       if (!std::strcmp(argv[i], "--no-marker-depth")) marker_depth = false;
       if (!std::strcmp(argv[i], "--no-keypoint-depth")) keypoint_depth = false;
-      if (!std::strcmp(argv[i], "--no-linearize")) linearize = false;
+      if (!std::strcmp(argv[i], "--response") && i + 1 < argc) response = argv[i + 1];
       if (!std::strcmp(argv[i], "--corner-sigma") && i + 1 < argc) corner_sigma = std::atof(argv[i + 1]);
       if (!std::strcmp(argv[i], "--prior-m") && i + 1 < argc) prior_m = std::atof(argv[i + 1]);
       if (!std::strcmp(argv[i], "--prior-deg") && i + 1 < argc) prior_deg = std::atof(argv[i + 1]);
@@ -74,7 +76,10 @@ int main(int argc, char** argv) {
     RoomMapBuildOptions build_options = MakeRoomMapBuildOptions(folder, stage);
     build_options.bundle_adjustment.use_marker_depth = marker_depth;
     build_options.bundle_adjustment.use_keypoint_depth = keypoint_depth;
-    build_options.linearize_srgb = linearize;
+    if (response != "estimate") {
+      build_options.estimate_response = false;
+      build_options.detector.edge.response = CameraResponse::FromName(response);
+    }
     if (corner_sigma > 0) build_options.marker_corner_sigma_px = corner_sigma;
     if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
     if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
@@ -159,7 +164,6 @@ int main(int argc, char** argv) {
     // Localisation of every sequence.
     CameraLocalizerOptions options = MakeCameraLocalizerOptions(folder.config);
     options.use_keypoints = loc_keypoints;
-    options.linearize_srgb = linearize;
     if (std::getenv("NO_LOC")) return 0;
     if (prior_m > 0) options.motion_prior_sigma_m = prior_m;
     if (prior_deg > 0) options.motion_prior_sigma_deg = prior_deg;
@@ -179,6 +183,13 @@ int main(int argc, char** argv) {
       if (!std::filesystem::is_directory(dir)) continue;
       if (!only.empty() && name.find(only) == std::string::npos) continue;
       const Sequence seq = Sequence::Open(dir);
+      if (response == "estimate") {
+        const RecordingResponse rr = EstimateRecordingResponse(seq, folder.config, build.map.camera_response);
+        options.detector.edge.response = rr.response;
+        std::cout << name << ": " << rr.message << "\n";
+      } else {
+        options.detector.edge.response = build.map.camera_response;
+      }
       CameraLocalizer localizer(build.map, folder.config.camera, options);
       std::vector<StampedPose> est;
       int lost = 0, lost_with_marker = 0;  // lost frames, and those with a mapped room marker detected

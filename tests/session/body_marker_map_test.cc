@@ -35,7 +35,7 @@ Scan RenderScan(const std::string& profile, int frames, uint64_t seed) {
   EXPECT_GE(body_index, 0);
   MarkerDetectorOptions detector_options;
   detector_options.id_ranges = {{100, 199}};
-  detector_options.edge.input_srgb = true;  // the simulator writes sRGB, as cameras do
+  detector_options.edge.response = CameraResponse::Srgb();  // the simulator writes sRGB, as cameras do
   MarkerDetector detector(detector_options);
   for (int f = 0; f < frames; ++f) {
     const sim::SimulatedFrame frame = simulator.RenderFrame(body_index, f);

@@ -1,0 +1,128 @@
+#include "features/response_from_recording.h"
+
+#include <algorithm>
+#include <map>
+
+#include <opencv2/aruco.hpp>
+
+#include <opencv2/imgproc.hpp>
+
+#include "features/edge_refinement.h"
+#include "util/check.h"
+#include "util/string_util.h"
+
+namespace arpos {
+
+RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& frames,
+                                             const MarkerDetectorOptions& detector,
+                                             const CameraResponse& fallback,
+                                             const RecordingResponseOptions& options) {
+  RecordingResponse out;
+  out.response = fallback;
+  PixelUndistorter undistorter;
+  if (detector.intrinsics.has_value()) undistorter = PixelUndistorter(*detector.intrinsics);
+  const int dict_id = ArucoDictionaryId(detector.dictionary);
+  ARPOS_CHECK(dict_id >= 0, "unknown dictionary " << detector.dictionary);
+  const cv::Ptr<cv::aruco::Dictionary> dictionary = cv::aruco::getPredefinedDictionary(dict_id);
+  CellEdgeOptions cell_options;
+  cell_options.marker_bits = dictionary->markerSize;
+  cell_options.border_bits = detector.edge.border_bits;
+  cell_options.quiet_zone_cells = detector.edge.quiet_zone_cells;
+  const int cells = cell_options.marker_bits + 2 * cell_options.border_bits;
+  std::map<int, cv::Mat> bits;
+  auto bits_of = [&](int id) -> const cv::Mat& {
+    auto it = bits.find(id);
+    if (it == bits.end()) {
+      cv::Mat m;
+      cv::aruco::drawMarker(dictionary, id, cells, m, cell_options.border_bits);
+      it = bits.emplace(id, m).first;
+    }
+    return it->second;
+  };
+
+  // Corners refined under the current estimate (the cell grid hangs on
+  // them), boundaries collected, the response solved; twice is enough: the
+  // widening depends on the corners only through the grid's placement.
+  EdgeRefinementOptions edge = detector.edge;
+  CameraResponse current = fallback;
+  EdgeRefinementWorkspace workspace;
+  for (int round = 0; round < options.rounds; ++round) {
+    edge.response = current;
+    std::vector<MarkerCellEdges> markers;
+    int frames_used = 0;
+    for (const ResponseFrame& f : frames) {
+      bool used = false;
+      for (const MarkerObservation& m : f.markers) {
+        const CornerRefinementResult r =
+            RefineMarkerCorners(f.gray, m.detected_corners_px, edge, undistorter, &workspace);
+        if (r.status != MarkerStatus::kRefined) continue;
+        std::optional<MarkerCellEdges> edges = PrepareMarkerCellEdges(
+            f.gray, r.corners_px, bits_of(m.id), r.blur_sigma_px, undistorter, cell_options);
+        if (!edges) continue;
+        markers.push_back(std::move(*edges));
+        used = true;
+      }
+      frames_used += used ? 1 : 0;
+    }
+    out.frames_used = frames_used;
+    out.markers_used = static_cast<int>(markers.size());
+    ResponseEstimate est = EstimateCameraResponse(markers, fallback, options.estimation);
+    out.estimate = est;
+    if (!est.ok) break;
+    const double change = est.response.MaxDifference(current);
+    current = est.response;
+    out.response = current;
+    out.estimated = true;
+    if (change < 0.002) break;
+  }
+  if (out.estimated) {
+    out.message = StringPrintf("camera response %s, in %d frames", out.estimate.message.c_str(),
+                               out.frames_used);
+  } else {
+    out.message = StringPrintf("camera response not estimated (%s, in %d frames); assumed %s",
+                               out.estimate.message.c_str(), out.frames_used,
+                               fallback.name().c_str());
+  }
+  return out;
+}
+
+RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
+                                            const CameraIntrinsics& intrinsics,
+                                            const MarkerDetectorOptions& detector,
+                                            const CameraResponse& fallback,
+                                            const RecordingResponseOptions& options) {
+  ARPOS_CHECK(options.max_frames > 0, "max_frames must be positive");
+  MarkerDetectorOptions d = detector;
+  d.refinement = CornerRefinementMethod::kOpenCvNone;  // refined under each round's response
+  d.intrinsics = intrinsics;
+  MarkerDetector det(d);
+  std::vector<ResponseFrame> frames;
+  const size_t n = sequence.size();
+  const size_t count = std::min<size_t>(n, options.max_frames);
+  for (size_t s = 0; s < count; ++s) {
+    const size_t i = count > 1 ? s * (n - 1) / (count - 1) : 0;
+    const RgbdFrame frame = sequence.LoadFrame(i, intrinsics);
+    ResponseFrame f;
+    if (frame.color.channels() == 3) {
+      cv::cvtColor(frame.color, f.gray, cv::COLOR_BGR2GRAY);
+    } else {
+      f.gray = frame.color;
+    }
+    det.Detect(f.gray, &f.markers);
+    if (!f.markers.empty()) frames.push_back(std::move(f));
+  }
+  return EstimateResponseFromFrames(frames, detector, fallback, options);
+}
+
+RecordingResponse EstimateRecordingResponse(const Sequence& sequence, const CaseConfig& config,
+                                            const CameraResponse& fallback,
+                                            const RecordingResponseOptions& options) {
+  MarkerDetectorOptions detector;
+  detector.dictionary = config.dictionary;
+  detector.id_ranges = {{config.room_markers.id_min, config.room_markers.id_max},
+                        {config.body_markers.id_min, config.body_markers.id_max}};
+  detector.intrinsics = config.camera;
+  return EstimateRecordingResponse(sequence, config.camera, detector, fallback, options);
+}
+
+}  // namespace arpos

@@ -1,0 +1,67 @@
+#pragma once
+/// The camera response of a recording, estimated from the markers it shows
+/// (camera_response.h explains the method).
+///
+/// A few dozen frames spread over the sequence are searched for markers of
+/// the given id ranges (room markers and body stickers alike: every printed
+/// marker is the same reference); each large enough marker gives its
+/// midpoint code, and the response is fitted to all of them, alternating
+/// with re-refining the corners under the new estimate. When the data cannot
+/// tell (too few markers large enough), `fallback` is returned with
+/// `estimated == false` and a message saying so.
+
+#include <string>
+#include <vector>
+
+#include "features/camera_response.h"
+#include "features/marker_detector.h"
+#include "sensor/case_config.h"
+#include "sensor/intrinsics.h"
+#include "sensor/sequence.h"
+
+namespace arpos {
+
+struct RecordingResponseOptions {
+  int max_frames = 40;  ///< frames sampled evenly over the sequence
+  int rounds = 2;       ///< refine / estimate alternations (at most)
+  ResponseEstimationOptions estimation;
+};
+
+struct RecordingResponse {
+  CameraResponse response;
+  bool estimated = false;  ///< false: `response` is the fallback
+  ResponseEstimate estimate;  ///< the last round's figures
+  int frames_used = 0;
+  int markers_used = 0;
+  std::string message;  ///< one line for people
+};
+
+/// Frames with their marker detections (any refinement: the detected
+/// corners are refined again here).
+struct ResponseFrame {
+  cv::Mat gray;  ///< CV_8UC1, the camera's codes
+  std::vector<MarkerObservation> markers;
+};
+
+/// Pure estimation on given frames. `detector` supplies the edge options and
+/// intrinsics (for lens distortion).
+RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& frames,
+                                             const MarkerDetectorOptions& detector,
+                                             const CameraResponse& fallback,
+                                             const RecordingResponseOptions& options = {});
+
+/// Samples `sequence`, detects markers of `detector.id_ranges` and estimates.
+/// Throws what loading a frame throws (InputError naming the file).
+RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
+                                            const CameraIntrinsics& intrinsics,
+                                            const MarkerDetectorOptions& detector,
+                                            const CameraResponse& fallback,
+                                            const RecordingResponseOptions& options = {});
+
+/// For a case's recording: markers of both the room and the body id ranges
+/// of `config`, its intrinsics.
+RecordingResponse EstimateRecordingResponse(const Sequence& sequence, const CaseConfig& config,
+                                            const CameraResponse& fallback,
+                                            const RecordingResponseOptions& options = {});
+
+}  // namespace arpos
