@@ -411,7 +411,8 @@ bool Simulator::OriginSeen(const Rigid3d& world_from_camera, double* side_px,
   }
   *side_px = 0;
   for (int k = 0; k < 4; ++k) *side_px += 0.25 * (px[(k + 1) % 4] - px[k]).norm();
-  return true;
+  // Too small to decode (6 cells of 2.5 px).
+  return *side_px >= 15;
 }
 
 OriginVisibility Simulator::MeasureOriginVisibility(const SequencePlan& room) const {
@@ -529,7 +530,7 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
       if (!OriginSeen(LookAt(k.position_m, k.look_at_m), &side, &angle)) base.push_back(k);
     }
   }
-  const int poor_at_most = std::max(6, room->frames / 5);
+  const int poor_at_most = std::max(5, room->frames / 8);
   // A drawn view that sees the marker too rarely (hidden, off the image), or
   // for poor visibility too often, is drawn again; after 12 tries the walk
   // falls back to good views.

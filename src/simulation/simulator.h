@@ -92,8 +92,8 @@ struct SimulationOptions {
 
 /// How well the room recording sees the origin marker: geometrically (its
 /// four corners inside the image by 4 px, in front of the camera, seen less
-/// than 75 deg off its normal, not behind the gantry, couch base or couch
-/// top), not by running a detector.
+/// than 75 deg off its normal, at least 15 px a side on average, not behind
+/// the gantry, couch base or couch top), not by running a detector.
 struct OriginVisibility {
   int frames = 0;               ///< room frames
   int visible_frames = 0;
