@@ -28,6 +28,7 @@
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
+#include "simulation/conditions.h"
 #include "simulation/sensor_model.h"
 #include "simulation/simulator.h"
 #include "util/check.h"
@@ -266,6 +267,50 @@ TEST(Rendering, OriginMarkerDetectedAtTheProjectedCornersAndPnpGivesTheTruePose)
     EXPECT_LT(error.translation_mm, 1.0) << "roll " << roll;
     EXPECT_LT(error.rotation_deg, 0.1) << "roll " << roll;
     std::printf("origin marker, roll %.0f deg: corners %.3f px (OpenCV SUBPIX %.3f px), PnP %.3f mm %.4f deg\n", roll, worst_px, worst_subpix_px, error.translation_mm, error.rotation_deg);
+  }
+}
+
+// The same at the sub-pixel level for an origin marker that random scene
+// conditions put on a wall or far on the floor: the room frame written to
+// the case is that marker's frame (a frame off by a tenth of a degree would
+// move these corners by a fifth of a pixel).
+TEST(Rendering, AMovedOriginMarkerIsTheRoomFrameAtTheSubPixelLevel) {
+  for (const std::string placement : {"wall", "floor_far"}) {
+    uint64_t seed = 1;
+    while (DrawSceneConditions(seed).origin_placement != placement) ++seed;
+    SimulationOptions o = SmallOptions();
+    o.seed = seed;
+    o.noise = false;
+    o.room_frames = 30;
+    o.random_conditions = true;
+    o.response = "srgb";  // what MeasureCorners decodes
+    o.auto_exposure = false;
+    const Simulator sim(o);
+    ASSERT_TRUE(sim.world().origin_moved);
+    const CameraIntrinsics& K = sim.profile().intrinsics;
+    const double s = sim.world().room_markers.front().size_m;
+    const std::array<Eigen::Vector3d, 4> corners_in_room = MarkerCornersInMarker(s);
+    for (double roll : {0.0, 23.0}) {
+      // A close, oblique view in the room frame (z out of the marker's face),
+      // scaled to the marker's size.
+      const Rigid3d room_from_camera =
+          LookAt(Eigen::Vector3d(0.12, -0.33, 0.40) * (s / 0.15), Eigen::Vector3d(0.01, 0.02, 0) * (s / 0.15),
+                 RadFromDeg(roll));
+      const SimulatedFrame frame = sim.RenderView(room_from_camera, std::nullopt, /*noise=*/false);
+      EXPECT_TRUE(frame.room_from_camera.IsApprox(room_from_camera, 0, 0));
+      std::vector<std::vector<cv::Point2f>> corners;
+      std::vector<int> ids;
+      cv::Mat gray;
+      cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+      cv::aruco::detectMarkers(gray, Dictionary(), corners, ids, SubpixParams());
+      const auto it = std::find(ids.begin(), ids.end(), 0);
+      ASSERT_NE(it, ids.end()) << placement << " roll " << roll;
+      const std::array<Eigen::Vector2d, 4> measured = MeasureCorners(frame.color, corners[it - ids.begin()]);
+      for (int c = 0; c < 4; ++c) {
+        const Eigen::Vector2d truth = ProjectRoomPoint(K, room_from_camera, corners_in_room[c]);
+        EXPECT_LT((measured[c] - truth).norm(), 0.1) << placement << " roll " << roll << " corner " << c;
+      }
+    }
   }
 }
 
