@@ -133,7 +133,7 @@ awk -F '\t' '
     }
   }
   function show(key) {
-    line = sprintf("%-32s %2d seeds: %2d failed", key, n[key], failed[key] + 0)
+    line = sprintf("%-34s %2d seeds: %2d failed", key, n[key], failed[key] + 0)
     if (failed[key] > 0) {
       sep = " ("
       split("simulate plan session", names, " ")
