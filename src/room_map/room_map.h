@@ -28,6 +28,7 @@
 #include "features/camera_response.h"
 #include "features/marker_observation.h"
 #include "geometry/rigid3.h"
+#include "sensor/depth_correction.h"
 #include "store/records.h"
 
 namespace arpos {
@@ -57,6 +58,9 @@ struct RoomMap {
   /// markers, else assumed): the fallback for later recordings whose own
   /// markers cannot tell.
   CameraResponse camera_response = CameraResponse::Srgb();
+  /// The depth camera's systematic error measured against the room's markers
+  /// (identity when the depth agreed): removed from later recordings' depth.
+  DepthCorrection depth_correction;
 
   /// The marker with this id, or nullptr.
   const RoomMapMarkerEntry* FindMarker(int id) const;

@@ -12,6 +12,7 @@
 #include <thread>
 #include <unordered_map>
 
+#include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -120,6 +121,15 @@ RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseConfig& config) {
   return options;
 }
 
+double RoomMapBuildReport::RoomFramePositionSigmaMm(const Eigen::Vector3d& p) const {
+  // A point moves by d_omega x p + d_t: Jacobian [-[p]x, I].
+  Eigen::Matrix<double, 3, 6> jp;
+  jp.leftCols<3>() << 0, p.z(), -p.y(), -p.z(), 0, p.x(), p.y(), -p.x(), 0;
+  jp.rightCols<3>().setIdentity();
+  const double var = (jp * room_frame_covariance * jp.transpose()).trace();
+  return std::isfinite(var) ? std::sqrt(std::max(0.0, var)) * 1000 : std::numeric_limits<double>::infinity();
+}
+
 std::string RoomMapBuildReport::ToText() const {
   std::ostringstream out;
   out << StringPrintf("frames: %d used of %d (%d with markers, %d posed by keypoints)\n", frames_used,
@@ -147,7 +157,13 @@ std::string RoomMapBuildReport::ToText() const {
                       joint_adjustment.iterations, joint_adjustment.seconds);
   out << StringPrintf("time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, adjustment %.2f s, total %.2f s\n",
                       frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
+  out << StringPrintf(
+      "room frame (origin marker, %d views): tilt %.4f deg, yaw %.4f deg, position at the couch "
+      "%.3f mm (1 sigma)\n",
+      origin_observations, room_frame_tilt_sigma_deg, room_frame_yaw_sigma_deg,
+      room_frame_couch_sigma_mm);
   if (!camera_response.empty()) out << camera_response << "\n";
+  if (!depth_correction.empty()) out << depth_correction << "\n";
   for (const auto& w : warnings) out << "warning: " << w << "\n";
   return out.str();
 }
@@ -287,12 +303,34 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
                       << ", case.yaml markers.room.origin_id) is never seen in the room sequence, so the "
                          "room frame is undefined; record the room again with the origin marker in view");
   }
-  const MarkerGraphResult graph = InitializeMarkerPoses(views, origin_id, marker_size, K);
+  // The map is built in the frame of a root marker held fixed in the
+  // adjustments: the origin marker when one of its views gives a clear
+  // single-view pose; otherwise (small, oblique, rarely seen) the marker with
+  // the most such views, the origin joining later from the cameras posed by
+  // the rest. The room frame is then moved onto the origin marker's adjusted
+  // pose, which rests on all of its corner observations.
+  int root_id = origin_id;
+  MarkerGraphResult graph = InitializeMarkerPoses(views, origin_id, marker_size, K);
   if (graph.room_from_marker.empty()) {
-    ARPOS_INPUT_ERROR(sequence.folder().string()
-                      << ": the origin marker (id " << origin_id
-                      << ") is seen but never sharply enough for a pose (blurred, occluded or too "
-                         "small); record the room again with the origin marker clearly in view");
+    std::map<int, int> usable_views;
+    for (const MarkerView& v : views) ++usable_views[v.marker_id];
+    int best = 0;
+    for (const auto& [id, count] : usable_views) {
+      if (count > best) {
+        best = count;
+        root_id = id;
+      }
+    }
+    if (best == 0) {
+      ARPOS_INPUT_ERROR(sequence.folder().string()
+                        << ": no room marker is seen sharply enough for a pose (blurred, occluded or "
+                           "too small); record the room again with the markers clearly in view");
+    }
+    graph = InitializeMarkerPoses(views, root_id, marker_size, K);
+    report.warnings.push_back(StringPrintf(
+        "the origin marker (id %d) has no clear single view; the map was started from marker %d "
+        "and the origin placed from all of its views",
+        origin_id, root_id));
   }
   report.unconnected_markers = graph.unconnected_markers;
   if (!graph.unconnected_markers.empty()) {
@@ -309,7 +347,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     marker_slot[id] = static_cast<int>(marker_ids.size());
     marker_ids.push_back(id);
     ba.room_from_marker.push_back(room_from_marker);
-    ba.marker_fixed.push_back(id == origin_id);
+    ba.marker_fixed.push_back(id == root_id);
   };
   for (const auto& [id, pose] : graph.room_from_marker) add_marker(id, pose);
   auto known_markers = [&]() {
@@ -640,11 +678,123 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   const auto t_adjust = Clock::now();
   progress("bundle adjustment", 0.7);
   rebuild_cameras();
+  if (!marker_slot.count(origin_id)) {
+    // The origin marker from the posed frames that see it: each IPPE
+    // solution of each view is a candidate, scored over all of its views.
+    std::vector<std::pair<int, int>> seen;  // (frame slot, marker index)
+    for (size_t s = 0; s < frames.size(); ++s) {
+      if (!frames[s].posed) continue;
+      for (size_t m = 0; m < frames[s].markers.size(); ++m) {
+        if (frames[s].markers[m].id == origin_id) seen.emplace_back(static_cast<int>(s), static_cast<int>(m));
+      }
+    }
+    const std::array<Eigen::Vector3d, 4> corners = MarkerCornersInMarker(marker_size);
+    double best_cost = std::numeric_limits<double>::infinity();
+    std::optional<Rigid3d> best;
+    for (const auto& [s, m] : seen) {
+      const MarkerPose& pose = frames[s].poses[m];
+      for (int k = 0; k < pose.num_solutions; ++k) {
+        const Rigid3d candidate = frames[s].camera_from_room.Inverse() * pose.solutions[k].camera_from_marker;
+        double cost = 0;
+        for (const auto& [s2, m2] : seen) {
+          for (int c = 0; c < 4; ++c) {
+            const Eigen::Vector3d p = frames[s2].camera_from_room * (candidate * corners[c]);
+            cost += p.z() > 0 ? (K.Project(p) - frames[s2].markers[m2].corners_px[c]).squaredNorm() : 1e6;
+          }
+        }
+        if (cost < best_cost) {
+          best_cost = cost;
+          best = candidate;
+        }
+      }
+    }
+    if (!best) {
+      ARPOS_INPUT_ERROR(sequence.folder().string()
+                        << ": the origin marker (id " << origin_id
+                        << ") is seen, but never fully and sharply in a frame the rest of the map "
+                           "places (blurred, occluded, cut by the image border or too small); record "
+                           "the room again with a close, sharp view of the origin marker");
+    }
+    add_marker(origin_id, *best);
+  }
   collect_marker_observations();
   ba.landmarks_in_room = landmarks;
   ba.keypoint_observations = keypoint_observations;
   BaOptions joint_options = options.bundle_adjustment;
   joint_options.threads = options.threads;
+  if (options.estimate_depth_correction) {
+    // Depth against the colour geometry: a joint adjustment without depth
+    // terms (the markers' printed size fixes the scale), then every depth
+    // reading at a keypoint or inside a marker against the depth the
+    // adjusted geometry gives it.
+    // (On a copy: the joint adjustment below starts where it would without
+    // the check; starting it from the depth-free solution measured worse.)
+    BaOptions vision_options = joint_options;
+    vision_options.use_marker_depth = false;
+    vision_options.use_keypoint_depth = false;
+    BaProblem vision = ba;
+    RunBundleAdjustment(&vision, vision_options);
+    std::vector<DepthComparison> comparisons;
+    for (const BaKeypointObservation& o : vision.keypoint_observations) {
+      if (!(o.depth_m > 0)) continue;
+      const double expected = (vision.camera_from_room[o.camera] * vision.landmarks_in_room[o.landmark]).z();
+      if (!(expected > 0.1)) continue;
+      comparisons.push_back({(o.pixel.x() - K.cx) / K.fx, (o.pixel.y() - K.cy) / K.fy, o.depth_m, expected,
+                             joint_options.DepthSigmaM(expected)});
+    }
+    for (const BaMarkerObservation& o : vision.marker_observations) {
+      const Rigid3d camera_from_marker = vision.camera_from_room[o.camera] * vision.room_from_marker[o.marker];
+      const Eigen::Vector3d n = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
+      const double d = n.dot(camera_from_marker.translation);
+      for (const DepthSample& sample : o.depth_samples) {
+        const double x = (sample.pixel.x() - K.cx) / K.fx, y = (sample.pixel.y() - K.cy) / K.fy;
+        const double denom = n.dot(Eigen::Vector3d(x, y, 1));
+        if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
+        const double expected = d / denom;
+        if (!(expected > 0.1)) continue;
+        comparisons.push_back({x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected)});
+      }
+    }
+    const DepthCorrectionFit fit = FitDepthCorrection(comparisons, K);
+    report.depth_correction = fit.message;
+    // Depth weighted by what it is worth: the noise model scaled to the
+    // spread the readings show around the colour geometry (after any
+    // correction) when that is clearly beyond the model. The spread includes
+    // the colour geometry's own errors (keypoints triangulated without
+    // depth): measured 1.2-1.3x on simulated cases whose depth follows the
+    // model exactly, where inflating made localisation worse (max 6.6 ->
+    // 10.5 mm on the planning tests' case), so below 1.5x nothing changes.
+    const double depth_factor =
+        fit.applied ? fit.normalised_rms_after : fit.normalised_rms_before;
+    if (depth_factor > options.depth_inflation_threshold) {
+      joint_options.depth_sigma_const_m *= depth_factor;
+      joint_options.depth_sigma_quad_per_m *= depth_factor;
+      report.depth_correction += StringPrintf("; depth weighted as %.2fx the sensor model's noise", depth_factor);
+    }
+    if (fit.applied) {
+      result.map.depth_correction = fit.correction;
+      const DepthCorrection& c = fit.correction;
+      auto correct = [&](double z, double u, double v) {
+        return c.TrueDepth(z, (u - K.cx) / K.fx, (v - K.cy) / K.fy);
+      };
+      for (BaKeypointObservation& o : ba.keypoint_observations) {
+        if (o.depth_m > 0) o.depth_m = correct(o.depth_m, o.pixel.x(), o.pixel.y());
+      }
+      for (BaMarkerObservation& o : ba.marker_observations) {
+        for (DepthSample& sample : o.depth_samples) {
+          sample.depth_m = static_cast<float>(correct(sample.depth_m, sample.pixel.x(), sample.pixel.y()));
+        }
+      }
+      // The frames' own copies (the observations are collected again below).
+      for (FrameData& f : frames) {
+        for (auto& samples : f.depth_samples) {
+          for (DepthSample& sample : samples) {
+            sample.depth_m = static_cast<float>(correct(sample.depth_m, sample.pixel.x(), sample.pixel.y()));
+          }
+        }
+      }
+    }
+  }
   report.joint_adjustment = RunBundleAdjustment(&ba, joint_options);
   // Drop outlier observations and adjust again.
   {
@@ -705,8 +855,65 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       report.joint_adjustment.usable = second.usable;
     }
   }
+  if (root_id != origin_id) {  // the room frame: the origin marker's
+    const Rigid3d origin_from_root = ba.room_from_marker[marker_slot.at(origin_id)].Inverse();
+    const Rigid3d root_from_origin = origin_from_root.Inverse();
+    for (Rigid3d& m : ba.room_from_marker) m = origin_from_root * m;
+    for (Rigid3d& c : ba.camera_from_room) c = c * root_from_origin;
+    for (Eigen::Vector3d& l : ba.landmarks_in_room) l = origin_from_root * l;
+  }
   for (size_t c = 0; c < camera_frame.size(); ++c) frames[camera_frame[c]].camera_from_room = ba.camera_from_room[c];
   report.adjustment_s = SecondsSince(t_adjust);
+
+  // The room frame's own uncertainty: the origin marker's pose from its
+  // corner observations alone, the cameras as adjusted (Gauss-Newton
+  // covariance, numeric Jacobian, perturbation in the room frame).
+  {
+    const int slot = marker_slot.at(origin_id);
+    const std::array<Eigen::Vector3d, 4> corners = MarkerCornersInMarker(marker_size);
+    const Rigid3d room_from_origin = ba.room_from_marker[slot];
+    Eigen::Matrix<double, 6, 6> info = Eigen::Matrix<double, 6, 6>::Zero();
+    int used = 0;
+    for (const BaMarkerObservation& o : ba.marker_observations) {
+      if (o.marker != slot) continue;
+      ++used;
+      const Rigid3d& camera_from_room = ba.camera_from_room[o.camera];
+      auto project = [&](const Eigen::Matrix<double, 6, 1>& xi, int c) {
+        const Rigid3d moved = Rigid3d::FromRotationVector(xi.head<3>(), xi.tail<3>()) * room_from_origin;
+        return K.Project(camera_from_room * (moved * corners[c]));
+      };
+      for (int c = 0; c < 4; ++c) {
+        Eigen::Matrix<double, 2, 6> j;
+        for (int k = 0; k < 6; ++k) {
+          Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
+          d(k) = 1e-6;
+          j.col(k) = (project(d, c) - project(-d, c)) / 2e-6;
+        }
+        info.noalias() += j.transpose() * j / (o.sigma_px[c] * o.sigma_px[c]);
+      }
+    }
+    report.origin_observations = used;
+    const Eigen::Matrix<double, 6, 6> cov = info.ldlt().solve(Eigen::Matrix<double, 6, 6>::Identity());
+    if (used > 0 && cov.allFinite()) {
+      // Tilt: rotation about the room's x and y axes (the origin marker's
+      // plane); yaw: about its normal; position: at the couch point.
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> tilt(cov.topLeftCorner<2, 2>());
+      report.room_frame_tilt_sigma_deg = std::sqrt(std::max(0.0, tilt.eigenvalues().maxCoeff())) * 180 / M_PI;
+      report.room_frame_yaw_sigma_deg = std::sqrt(std::max(0.0, cov(2, 2))) * 180 / M_PI;
+      report.room_frame_covariance = cov;
+      report.room_frame_couch_sigma_mm = report.RoomFramePositionSigmaMm(options.couch_point_in_room);
+    }
+    if (!(report.room_frame_tilt_sigma_deg <= options.max_room_frame_tilt_sigma_deg) ||
+        !(report.room_frame_couch_sigma_mm <= options.max_room_frame_couch_sigma_mm)) {
+      report.warnings.push_back(StringPrintf(
+          "the room frame is weakly determined: the origin marker (id %d, %d views) fixes its tilt to "
+          "%.3f deg and the couch position to %.2f mm (1 sigma; tolerances %.3f deg, %.2f mm); "
+          "record the room again with a few close, sharp views of the origin marker from different "
+          "sides",
+          origin_id, used, report.room_frame_tilt_sigma_deg, report.room_frame_couch_sigma_mm,
+          options.max_room_frame_tilt_sigma_deg, options.max_room_frame_couch_sigma_mm));
+    }
+  }
 
   // ---------------------------------------------------------------- 5. the map
   progress("residuals and map", 0.95);
@@ -726,6 +933,13 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   double mean_sum = 0;
   int mean_n = 0;
   for (size_t m = 0; m < marker_ids.size(); ++m) {
+    if (n_obs[m] == 0 && marker_ids[m] == origin_id) {
+      ARPOS_INPUT_ERROR(sequence.folder().string()
+                        << ": every view of the origin marker (id " << origin_id
+                        << ") disagrees with the rest of the room map (moved during the recording, "
+                           "or a second print of it in the room?); record the room again with a "
+                           "close, sharp view of the origin marker");
+    }
     if (n_obs[m] == 0) continue;  // every observation rejected: not trustworthy
     if (n_obs[m] < options.min_marker_observations && marker_ids[m] != origin_id) {
       report.sparse_markers.push_back(marker_ids[m]);

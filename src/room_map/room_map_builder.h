@@ -23,6 +23,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -69,6 +70,13 @@ struct RoomMapBuildOptions {
   /// (features/response_from_recording.h) and refine corners under it; when
   /// the data cannot tell, or when off, `detector.edge.response` is used.
   bool estimate_response = true;
+  /// Check the depth against the markers (after a markers-only adjustment
+  /// without depth terms) and remove a systematic error the data show
+  /// (sensor/depth_correction.h) before depth enters the map.
+  bool estimate_depth_correction = true;
+  /// Depth readings that spread around the colour geometry by more than
+  /// this many times the sensor model's noise are weighted as that spread.
+  double depth_inflation_threshold = 1.5;
   RecordingResponseOptions response;
   int frame_step = 1;   ///< use every n-th frame
   int max_frames = 0;   ///< 0 = all
@@ -101,6 +109,12 @@ struct RoomMapBuildOptions {
   /// Landmarks are thinned over a voxel grid of this size for spread.
   double landmark_voxel_m = 0.1;
   std::vector<ExclusionBox> exclude_landmarks;
+
+  /// Where the patient will be (room frame; the plan's isocentre), and how
+  /// weak a room frame may be there before the build warns (1 sigma).
+  Eigen::Vector3d couch_point_in_room = Eigen::Vector3d::Zero();
+  double max_room_frame_tilt_sigma_deg = 0.05;
+  double max_room_frame_couch_sigma_mm = 0.5;
 
   /// Observations with a reprojection error above this many sigmas after the
   /// first joint adjustment are dropped before the second.
@@ -139,6 +153,22 @@ struct RoomMapBuildReport {
   std::vector<std::string> warnings;
   /// How the camera response was found (estimated, or assumed and why).
   std::string camera_response;
+  /// The depth check against the markers, and the correction if one was made.
+  std::string depth_correction;
+  /// The room frame's own uncertainty (1 sigma): the origin marker's pose
+  /// from its views given the adjusted cameras; tilt about the marker's
+  /// in-plane axes, yaw about its normal, and the position error this
+  /// gives at options.couch_point_in_room.
+  int origin_observations = 0;
+  double room_frame_tilt_sigma_deg = std::numeric_limits<double>::infinity();
+  double room_frame_yaw_sigma_deg = std::numeric_limits<double>::infinity();
+  double room_frame_couch_sigma_mm = std::numeric_limits<double>::infinity();
+  /// The origin marker pose's covariance (rotation vector rad, translation
+  /// m; room frame); infinite when it has no observation.
+  Eigen::Matrix<double, 6, 6> room_frame_covariance =
+      Eigen::Matrix<double, 6, 6>::Constant(std::numeric_limits<double>::infinity());
+  /// 1-sigma position error (mm) the room frame's uncertainty gives at a point.
+  double RoomFramePositionSigmaMm(const Eigen::Vector3d& point_in_room) const;
   /// Camera poses of the used frames (sequence index, room_from_camera).
   std::vector<std::pair<int, Rigid3d>> room_from_camera;
 

@@ -9,6 +9,7 @@
 // --store DB uses the newest room map in DB instead of building one.
 // Diagnostics by environment: NO_LOC=1 (map only), TRUTH_MARKERS=1 (localise
 // against the true marker poses), AXES=1 (camera error in camera axes),
+// NO_DEPTH_CHECK=1 (no depth check against the colour geometry),
 // MIN_LM_OBS, MAX_LM, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
@@ -82,6 +83,7 @@ int main(int argc, char** argv) {
     }
     if (corner_sigma > 0) build_options.marker_corner_sigma_px = corner_sigma;
     if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
+    if (std::getenv("NO_DEPTH_CHECK")) build_options.estimate_depth_correction = false;
     if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
     RoomMapBuildResult build;
     if (!store.empty()) {

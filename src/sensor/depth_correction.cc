@@ -1,0 +1,216 @@
+#include "sensor/depth_correction.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "util/check.h"
+#include "util/string_util.h"
+
+namespace arpos {
+
+namespace {
+
+/// Bilinear weights of (x, y) on the grid: up to 4 (index, weight) pairs.
+int GridWeights(const DepthCorrection& c, double x, double y, int* idx, double* w) {
+  if (c.nx < 2 || c.ny < 2) return 0;
+  const double gx = std::clamp((x - c.x0) / (c.x1 - c.x0) * (c.nx - 1), 0.0, c.nx - 1.0);
+  const double gy = std::clamp((y - c.y0) / (c.y1 - c.y0) * (c.ny - 1), 0.0, c.ny - 1.0);
+  const int i = std::min(c.nx - 2, static_cast<int>(gx)), j = std::min(c.ny - 2, static_cast<int>(gy));
+  const double fx = gx - i, fy = gy - j;
+  idx[0] = j * c.nx + i;
+  idx[1] = idx[0] + 1;
+  idx[2] = idx[0] + c.nx;
+  idx[3] = idx[2] + 1;
+  w[0] = (1 - fx) * (1 - fy);
+  w[1] = fx * (1 - fy);
+  w[2] = (1 - fx) * fy;
+  w[3] = fx * fy;
+  return 4;
+}
+
+}  // namespace
+
+double DepthCorrection::Field(double x, double y) const {
+  int idx[4];
+  double w[4];
+  const int n = GridWeights(*this, x, y, idx, w);
+  double f = 0;
+  for (int k = 0; k < n; ++k) f += w[k] * grid[idx[k]];
+  return f;
+}
+
+bool DepthCorrection::IsIdentity() const {
+  return scale == 0 && std::all_of(grid.begin(), grid.end(), [](double c) { return c == 0; });
+}
+
+double DepthCorrection::TrueDepth(double z, double x, double y) const {
+  const double f = Field(x, y);
+  // z = t (1 + scale) + t^2 f: the root near z.
+  const double b = 1 + scale;
+  if (std::abs(f) < 1e-12) return z / b;
+  const double disc = b * b + 4 * f * z;
+  if (disc < 0) return z / b;
+  return 2 * z / (b + std::sqrt(disc));  // (-b + sqrt(disc)) / (2 f), without cancellation
+}
+
+double DepthCorrection::ErrorAt1mCentreMm() const { return 1000 * (scale + Field(0, 0)); }
+
+std::string DepthCorrection::Describe() const {
+  double worst = 0;
+  for (double g : grid) worst = std::max(worst, std::abs(scale + g) * 1000);
+  return StringPrintf("depth reads %+.2f mm at 1 m in the image centre (scale %+.3f %%), up to %.2f mm "
+                      "at 1 m elsewhere in the image",
+                      ErrorAt1mCentreMm(), 100 * scale, std::max(worst, std::abs(1000 * scale)));
+}
+
+std::string DepthCorrection::Serialize() const {
+  std::ostringstream out;
+  out << "depth correction:" << StringPrintf(" %.9g %d %d %.9g %.9g %.9g %.9g", scale, nx, ny, x0, x1, y0, y1);
+  for (double g : grid) out << StringPrintf(" %.9g", g);
+  return out.str();
+}
+
+DepthCorrection DepthCorrection::Parse(const std::string& text, const std::string& what) {
+  const std::string head = "depth correction:";
+  if (text.rfind(head, 0) != 0) {
+    ARPOS_INPUT_ERROR(what << ": expected '" << head << " scale nx ny x0 x1 y0 y1 grid...', got '"
+                           << text.substr(0, 40) << "'");
+  }
+  std::istringstream in(text.substr(head.size()));
+  DepthCorrection c;
+  if (!(in >> c.scale >> c.nx >> c.ny >> c.x0 >> c.x1 >> c.y0 >> c.y1)) {
+    ARPOS_INPUT_ERROR(what << ": depth correction header is malformed");
+  }
+  if (c.nx < 0 || c.ny < 0 || c.nx > 64 || c.ny > 64 || (c.nx * c.ny > 0 && (c.nx < 2 || c.ny < 2)) ||
+      (c.nx > 0 && !(c.x1 > c.x0 && c.y1 > c.y0))) {
+    ARPOS_INPUT_ERROR(what << ": depth correction grid is malformed");
+  }
+  c.grid.resize(static_cast<size_t>(c.nx) * c.ny);
+  for (double& g : c.grid) {
+    if (!(in >> g)) ARPOS_INPUT_ERROR(what << ": depth correction has too few grid values");
+  }
+  std::string extra;
+  if (in >> extra) ARPOS_INPUT_ERROR(what << ": depth correction has too many values");
+  if (!std::isfinite(c.scale) || std::any_of(c.grid.begin(), c.grid.end(), [](double v) { return !std::isfinite(v); })) {
+    ARPOS_INPUT_ERROR(what << ": depth correction has a non-finite number");
+  }
+  return c;
+}
+
+DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& samples,
+                                      const CameraIntrinsics& intrinsics) {
+  DepthCorrectionFit out;
+  out.samples = static_cast<int>(samples.size());
+  double z_min = 1e9, z_max = 0, sum_sq = 0;
+  for (const DepthComparison& s : samples) {
+    z_min = std::min(z_min, s.expected_m);
+    z_max = std::max(z_max, s.expected_m);
+    const double r = (s.measured_m - s.expected_m) / s.sigma_m;
+    sum_sq += r * r;
+  }
+  if (samples.size() < 200 || z_max < 1.3 * z_min) {
+    out.message = StringPrintf("depth not checked against the colour geometry (%zu samples, depths %.2f-%.2f m)",
+                               samples.size(), z_min, z_max);
+    return out;
+  }
+  out.normalised_rms_before = std::sqrt(sum_sq / samples.size());
+
+  DepthCorrection c;
+  c.nx = 9;
+  c.ny = 7;
+  c.x0 = (-0.5 - intrinsics.cx) / intrinsics.fx;
+  c.x1 = (intrinsics.width - 0.5 - intrinsics.cx) / intrinsics.fx;
+  c.y0 = (-0.5 - intrinsics.cy) / intrinsics.fy;
+  c.y1 = (intrinsics.height - 0.5 - intrinsics.cy) / intrinsics.fy;
+  const int ng = c.nx * c.ny, np = 1 + ng;
+  c.grid.assign(ng, 0.0);
+  // Priors (1 sigma, field in 1/m = mm at 1 m / 1000): neighbouring nodes
+  // differ by ~2 mm at 1 m at most; each node within ~10 mm of zero.
+  const double smooth_sigma = 0.002, node_sigma = 0.01;
+  Eigen::VectorXd p = Eigen::VectorXd::Zero(np);
+  std::vector<double> w(samples.size(), 1.0);
+  for (int round = 0; round < 4; ++round) {
+    Eigen::MatrixXd ata = Eigen::MatrixXd::Zero(np, np);
+    Eigen::VectorXd atb = Eigen::VectorXd::Zero(np);
+    for (size_t i = 0; i < samples.size(); ++i) {
+      const DepthComparison& s = samples[i];
+      const double t = s.expected_m;
+      int idx[4];
+      double gw[4];
+      const int n = GridWeights(c, s.x, s.y, idx, gw);
+      const double wi = w[i] / (s.sigma_m * s.sigma_m);
+      const double r = s.measured_m - s.expected_m;
+      // Columns: 0 = scale (t), 1 + idx = grid (t^2 gw).
+      int cols[5] = {0};
+      double a[5] = {t};
+      for (int k = 0; k < n; ++k) {
+        cols[k + 1] = 1 + idx[k];
+        a[k + 1] = t * t * gw[k];
+      }
+      for (int u = 0; u <= n; ++u) {
+        atb(cols[u]) += wi * a[u] * r;
+        for (int v = 0; v <= n; ++v) ata(cols[u], cols[v]) += wi * a[u] * a[v];
+      }
+    }
+    for (int g = 0; g < ng; ++g) ata(1 + g, 1 + g) += 1.0 / (node_sigma * node_sigma);
+    auto smooth = [&](int g1, int g2) {
+      const double s2 = 1.0 / (smooth_sigma * smooth_sigma);
+      ata(1 + g1, 1 + g1) += s2;
+      ata(1 + g2, 1 + g2) += s2;
+      ata(1 + g1, 1 + g2) -= s2;
+      ata(1 + g2, 1 + g1) -= s2;
+    };
+    for (int j = 0; j < c.ny; ++j) {
+      for (int i = 0; i < c.nx; ++i) {
+        if (i + 1 < c.nx) smooth(j * c.nx + i, j * c.nx + i + 1);
+        if (j + 1 < c.ny) smooth(j * c.nx + i, (j + 1) * c.nx + i);
+      }
+    }
+    p = ata.ldlt().solve(atb);
+    c.scale = p(0);
+    for (int g = 0; g < ng; ++g) c.grid[g] = p(1 + g);
+    for (size_t i = 0; i < samples.size(); ++i) {  // Huber weights at 2 sigma
+      const DepthComparison& s = samples[i];
+      const double pred = c.scale * s.expected_m + s.expected_m * s.expected_m * c.Field(s.x, s.y);
+      const double r = std::abs(s.measured_m - s.expected_m - pred) / s.sigma_m;
+      w[i] = r <= 2 ? 1.0 : 2.0 / r;
+    }
+  }
+  sum_sq = 0;
+  for (const DepthComparison& s : samples) {
+    const double r = (c.TrueDepth(s.measured_m, s.x, s.y) - s.expected_m) / s.sigma_m;
+    sum_sq += r * r;
+  }
+  out.normalised_rms_after = std::sqrt(sum_sq / samples.size());
+  out.correction = c;
+  out.applied = out.normalised_rms_after < 0.85 * out.normalised_rms_before && std::abs(c.scale) < 0.05;
+  out.message = out.applied
+                    ? StringPrintf("%s; removed (depth residual %.2f -> %.2f sigma over %d samples)",
+                                   c.Describe().c_str(), out.normalised_rms_before,
+                                   out.normalised_rms_after, out.samples)
+                    : StringPrintf("depth agrees with the colour geometry (residual %.2f sigma over %d "
+                                   "samples; a correction would give %.2f): not corrected",
+                                   out.normalised_rms_before, out.samples, out.normalised_rms_after);
+  if (out.applied) out.correction = c;
+  return out;
+}
+void CorrectDepthImage(const CameraIntrinsics& intrinsics, const DepthCorrection& correction,
+                       cv::Mat* depth) {
+  ARPOS_CHECK(depth != nullptr && depth->type() == CV_16UC1, "CorrectDepthImage needs a CV_16UC1 image");
+  if (correction.IsIdentity() || depth->empty()) return;
+  const double to_m = 1.0 / intrinsics.depth_scale;
+  for (int v = 0; v < depth->rows; ++v) {
+    uint16_t* row = depth->ptr<uint16_t>(v);
+    const double y = (v - intrinsics.cy) / intrinsics.fy;
+    for (int u = 0; u < depth->cols; ++u) {
+      if (row[u] == 0) continue;
+      const double x = (u - intrinsics.cx) / intrinsics.fx;
+      const double z = correction.TrueDepth(row[u] * to_m, x, y);
+      row[u] = static_cast<uint16_t>(std::clamp(std::lround(z * intrinsics.depth_scale), 1L, 65535L));
+    }
+  }
+}
+
+}  // namespace arpos

@@ -1,0 +1,78 @@
+#pragma once
+/// Systematic depth error of an RGB-D camera, estimated against what the
+/// markers of a recording measure, and its removal from depth images.
+///
+/// Model (structured-light and time-of-flight sensors alike: a scale error of
+/// the baseline or clock, and a smooth error field that grows with the
+/// square of the distance, as disparity errors do):
+///   z_measured = z_true * (1 + scale) + z_true^2 * field(x, y)
+/// with (x, y) = ((u - cx) / fx, (v - cy) / fy) the ideal normalised image
+/// coordinates and field (1/m) bilinear on a coarse grid over the image
+/// (9 x 7 nodes: smooth errors of a few cycles across the image, as
+/// structured-light sensors show; a quadratic polynomial was tried and left
+/// such fields in place). Fitted (robust linear least squares) to depth samples inside
+/// markers whose depth the colour image fixes through the markers' printed
+/// size (room map adjustment without depth terms). Kept only when it
+/// explains the data clearly better than no correction (FitDepthCorrection).
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "sensor/intrinsics.h"
+
+namespace arpos {
+
+struct DepthCorrection {
+  double scale = 0;
+  /// The field's grid: nx * ny values, row-major, nodes spaced evenly over
+  /// [x0, x1] x [y0, y1]; empty = no field.
+  int nx = 0, ny = 0;
+  double x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+  std::vector<double> grid;
+
+  double Field(double x, double y) const;
+
+  bool IsIdentity() const;
+  /// The true depth for a measured one at normalised coordinates (x, y).
+  double TrueDepth(double z_measured_m, double x, double y) const;
+  /// Measured depth error at z_true = 1 m in the image centre and its
+  /// largest magnitude over the image corners (mm), for people.
+  double ErrorAt1mCentreMm() const;
+  std::string Describe() const;
+  /// "depth correction: scale nx ny x0 x1 y0 y1 g..."; Parse reads it back (InputError
+  /// naming `what` on malformed text).
+  std::string Serialize() const;
+  static DepthCorrection Parse(const std::string& text, const std::string& what);
+};
+
+/// A depth reading and the depth the markers say it should have.
+struct DepthComparison {
+  double x = 0, y = 0;         ///< normalised image coordinates
+  double measured_m = 0;       ///< the sensor's reading
+  double expected_m = 0;       ///< from the colour geometry
+  double sigma_m = 0.001;      ///< the reading's noise (1 sigma)
+};
+
+struct DepthCorrectionFit {
+  bool applied = false;  ///< false: no correction is better supported than none
+  DepthCorrection correction;
+  int samples = 0;
+  /// RMS of (measured - expected) / sigma before and after the correction.
+  double normalised_rms_before = 0, normalised_rms_after = 0;
+  std::string message;
+};
+
+/// Fits the model to `samples`; `applied` only when there are enough samples
+/// spread over depth and the normalised RMS drops by at least 20 %.
+DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& samples,
+                                      const CameraIntrinsics& intrinsics);
+
+/// Corrects a CV_16UC1 depth image (intrinsics.depth_scale units per metre,
+/// registered to colour) in place; zeros stay zeros.
+void CorrectDepthImage(const CameraIntrinsics& intrinsics, const DepthCorrection& correction,
+                       cv::Mat* depth);
+
+}  // namespace arpos
