@@ -358,7 +358,10 @@ void SessionController::Run() {
     ++result_.frames_considered;
     if (i % 20 == 0) Step(StringPrintf("body scan frame %zu of %zu", i + 1, scan.size()), 0.05 + 0.5 * i / scan.size());
     auto t0 = Clock::now();
-    const RgbdFrame frame = scan.LoadFrame(i, camera);
+    RgbdFrame frame = scan.LoadFrame(i, camera);
+    // The depth camera's systematic error measured in the room (the same
+    // camera), removed before the depth is used.
+    if (!frame.depth.empty()) CorrectDepthImage(camera, room_map.depth_correction, &frame.depth);
     const LocalizationResult located = localizer.Localize(frame);
     t_localize += SecondsSince(t0);
     ScanFrame f;

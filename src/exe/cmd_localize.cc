@@ -104,7 +104,8 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
   int tracked = 0, relocalized = 0, lost = 0;
   double total_ms = 0;
   for (size_t i = 0; i < sequence.size(); ++i) {
-    const RgbdFrame frame = sequence.LoadFrame(i, config.camera);
+    RgbdFrame frame = sequence.LoadFrame(i, config.camera);
+    if (!frame.depth.empty()) CorrectDepthImage(config.camera, localizer.map().depth_correction, &frame.depth);
     const LocalizationResult r = localizer.Localize(frame);
     if (r.ok) poses.push_back({frame.timestamp_s, r.room_from_camera});
     tracked += r.status == LocalizationStatus::kTracked;
