@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
@@ -25,6 +26,15 @@ void ForEachDataLine(const std::filesystem::path& path, Fn fn) {
     if (trimmed.empty() || trimmed[0] == '#') continue;
     fn(SplitWhitespace(trimmed), line_number);
   }
+}
+
+// True for a token strtod reads whole as NaN or an infinity ("nan", "-inf",
+// "1e999").
+bool IsNonFiniteNumber(const std::string& token) {
+  if (token.empty()) return false;
+  char* end = nullptr;
+  const double value = std::strtod(token.c_str(), &end);
+  return end == token.c_str() + token.size() && !std::isfinite(value);
 }
 
 }  // namespace
@@ -60,9 +70,19 @@ void WriteImageList(const std::filesystem::path& path, const std::vector<ImageLi
 std::vector<StampedPose> ReadTrajectory(const std::filesystem::path& path) {
   std::vector<StampedPose> poses;
   ForEachDataLine(path, [&](const std::vector<std::string>& tokens, int line) {
+    static const char* const kFields[8] = {"timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw"};
     double v[8];
     bool ok = tokens.size() == 8;
-    for (size_t i = 0; ok && i < 8; ++i) ok = ParseDouble(tokens[i], &v[i]);
+    for (size_t i = 0; ok && i < 8; ++i) {
+      ok = ParseDouble(tokens[i], &v[i]);
+      // ParseDouble refuses nan and inf as it refuses words; a number that is
+      // not finite deserves to be named (a NaN in a pose is a broken export,
+      // not a miscounted line).
+      if (!ok && IsNonFiniteNumber(tokens[i])) {
+        ARPOS_INPUT_ERROR(path.string() << ":" << line << ": " << kFields[i] << " is '" << tokens[i]
+                                        << "', not a finite number");
+      }
+    }
     if (!ok) {
       ARPOS_INPUT_ERROR(path.string() << ":" << line
                                       << ": expected 8 numbers 'timestamp tx ty tz qx qy qz qw'");

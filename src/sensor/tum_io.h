@@ -30,8 +30,9 @@ struct StampedPose {
 };
 
 /// Reads "timestamp tx ty tz qx qy qz qw" lines. Throws InputError naming file
-/// and line for a malformed line or a quaternion far from unit norm (|q| not
-/// within 1e-3 of 1; smaller deviations are normalised).
+/// and line for a malformed line, a value that is not finite (naming the
+/// field and the value, e.g. "tz is 'nan'"), or a quaternion far from unit
+/// norm (|q| not within 1e-3 of 1; smaller deviations are normalised).
 std::vector<StampedPose> ReadTrajectory(const std::filesystem::path& path);
 /// Writes atomically with full precision (timestamps to 1e-6 s, 9 digits).
 void WriteTrajectory(const std::filesystem::path& path, const std::vector<StampedPose>& poses,

@@ -48,6 +48,35 @@ TEST(TumIo, MalformedLinesNameFileAndLine) {
   EXPECT_THROW(ReadMatrix4(dir.path() / "m.txt"), InputError);
 }
 
+// A NaN in a pose line used to be reported as "expected 8 numbers", as if
+// the line were short.
+TEST(TumIo, ANonFiniteValueIsNamedWithFileLineAndField) {
+  TempDir dir;
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"1.0 0 0 nan 0 0 0 1", "tz is 'nan', not a finite number"},
+      {"1.0 0 0 0 0 0 0 -inf", "qw is '-inf', not a finite number"},
+      {"1e999 0 0 0 0 0 0 1", "timestamp is '1e999', not a finite number"},
+      {"1.0 NaN 0 0 0 0 0 1", "tx is 'NaN', not a finite number"}};
+  for (const auto& [line, message] : cases) {
+    WriteFileAtomic(dir.path() / "gt.txt", "# timestamp tx ty tz qx qy qz qw\n0.5 0 0 0 0 0 0 1\n" + line + "\n");
+    try {
+      ReadTrajectory(dir.path() / "gt.txt");
+      ADD_FAILURE() << "no throw for " << line;
+    } catch (const InputError& e) {
+      const std::string expected = (dir.path() / "gt.txt").string() + ":3: " + message;
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  }
+  // A word is still a malformed line, not a non-finite number.
+  WriteFileAtomic(dir.path() / "w.txt", "1.0 0 0 zero 0 0 0 1\n");
+  try {
+    ReadTrajectory(dir.path() / "w.txt");
+    ADD_FAILURE() << "no throw";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("w.txt:1: expected 8 numbers"), std::string::npos) << e.what();
+  }
+}
+
 TEST(TumIo, AssociationIsGreedyAndWindowed) {
   const std::vector<double> a = {1.0, 1.033, 1.066, 2.0};
   const std::vector<double> b = {1.001, 1.035, 1.5, 1.067};
