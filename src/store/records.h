@@ -127,6 +127,20 @@ struct RoomMapRecord {
   /// descriptors. Both empty if the map has no keypoint layer.
   StoredPointCloud landmarks_in_room;
   ByteMatrix landmark_descriptors;
+  /// The colour camera's response as CameraResponse::Serialize writes it
+  /// (features/camera_response.h); empty: not recorded (read as sRGB).
+  /// Stored as text so the store does not depend on the features layer.
+  std::string camera_response;
+  /// The depth camera's systematic error as DepthCorrection::Serialize
+  /// writes it (sensor/depth_correction.h); empty: not recorded (no correction).
+  std::string depth_correction;
+  /// The room frame's own uncertainty (1 sigma; room_map_builder.h
+  /// RoomMapBuildReport): tilt of the origin marker about its in-plane axes,
+  /// yaw about its normal, and the position error at the plan's isocentre.
+  /// Empty: not measured (maps from before schema version 4, or too few views).
+  std::optional<double> room_frame_tilt_sigma_deg;
+  std::optional<double> room_frame_yaw_sigma_deg;
+  std::optional<double> room_frame_couch_sigma_mm;
   std::int64_t created_unix_ms = 0;
 };
 

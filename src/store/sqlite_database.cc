@@ -42,6 +42,28 @@ std::optional<Id> OptionalId(const SqliteStatement& s, int column) {
   return Id(s.ColumnInt64(column));
 }
 
+std::optional<double> OptionalDouble(const SqliteStatement& s, int column) {
+  if (s.ColumnIsNull(column)) return std::nullopt;
+  return s.ColumnDouble(column);
+}
+
+void BindOptionalDouble(SqliteStatement& s, int index, const std::optional<double>& value) {
+  if (value) {
+    s.BindDouble(index, *value);
+  } else {
+    s.BindNull(index);
+  }
+}
+
+// Optional text columns hold NULL rather than '' for "not recorded".
+void BindTextOrNull(SqliteStatement& s, int index, const std::string& text) {
+  if (text.empty()) {
+    s.BindNull(index);
+  } else {
+    s.BindText(index, text);
+  }
+}
+
 // Finds before SQLite does what it would report as "unable to open database
 // file" or, at the first write, "attempt to write a readonly database": a
 // missing or unwritable folder (a file store keeps PATH-wal and PATH-shm
@@ -346,7 +368,9 @@ RoomMapId SqliteDatabase::AddRoomMap(const RoomMapRecord& room_map) {
     SqliteStatementGuard s(
         Prepared("INSERT INTO room_maps (plan_id, recording_id, origin_marker_id, marker_size_m, "
                  "mean_residual_px, max_residual_px, landmarks_in_room, landmark_descriptors, "
-                 "created_unix_ms) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)"));
+                 "created_unix_ms, camera_response, depth_correction, room_frame_tilt_sigma_deg, "
+                 "room_frame_yaw_sigma_deg, room_frame_couch_sigma_mm) "
+                 "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14)"));
     s->BindId(1, room_map.plan_id);
     s->BindOptionalId(2, room_map.recording_id);
     s->BindInt64(3, room_map.origin_marker_id);
@@ -364,6 +388,11 @@ RoomMapId SqliteDatabase::AddRoomMap(const RoomMapRecord& room_map) {
       s->BindNull(8);
     }
     s->BindInt64(9, OrNow(room_map.created_unix_ms));
+    BindTextOrNull(*s, 10, room_map.camera_response);
+    BindTextOrNull(*s, 11, room_map.depth_correction);
+    BindOptionalDouble(*s, 12, room_map.room_frame_tilt_sigma_deg);
+    BindOptionalDouble(*s, 13, room_map.room_frame_yaw_sigma_deg);
+    BindOptionalDouble(*s, 14, room_map.room_frame_couch_sigma_mm);
     s->Execute();
   }
   const RoomMapId id(LastInsertRowId());
@@ -387,7 +416,9 @@ std::optional<RoomMapRecord> SqliteDatabase::GetRoomMap(RoomMapId id) {
   {
     SqliteStatementGuard s(
         Prepared("SELECT plan_id, recording_id, origin_marker_id, marker_size_m, mean_residual_px, "
-                 "max_residual_px, landmarks_in_room, landmark_descriptors, created_unix_ms "
+                 "max_residual_px, landmarks_in_room, landmark_descriptors, created_unix_ms, "
+                 "camera_response, depth_correction, room_frame_tilt_sigma_deg, "
+                 "room_frame_yaw_sigma_deg, room_frame_couch_sigma_mm "
                  "FROM room_maps WHERE room_map_id = ?1"));
     s->BindId(1, id);
     if (!s->Step()) return std::nullopt;
@@ -407,6 +438,11 @@ std::optional<RoomMapRecord> SqliteDatabase::GetRoomMap(RoomMapId id) {
           s->ColumnBlob(7), Context("room_maps.landmark_descriptors", "room map", id.value()));
     }
     room_map.created_unix_ms = s->ColumnInt64(8);
+    if (!s->ColumnIsNull(9)) room_map.camera_response = s->ColumnText(9);
+    if (!s->ColumnIsNull(10)) room_map.depth_correction = s->ColumnText(10);
+    room_map.room_frame_tilt_sigma_deg = OptionalDouble(*s, 11);
+    room_map.room_frame_yaw_sigma_deg = OptionalDouble(*s, 12);
+    room_map.room_frame_couch_sigma_mm = OptionalDouble(*s, 13);
   }
   SqliteStatementGuard s(Prepared(
       "SELECT marker_id, corners_in_room, residual_px, num_observations FROM room_map_markers "

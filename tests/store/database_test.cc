@@ -292,6 +292,51 @@ TEST(SqliteDatabase, SchemaChecksRefuseBadRows) {
   ExpectStoreError([&] { db->AddTrackingRun(run); }, SQLITE_CONSTRAINT_CHECK);
 }
 
+// What planning measures about the camera (schema version 4): kept verbatim
+// when given, NULL (not '' or 0) when not, and never negative.
+TEST(SqliteDatabase, RoomMapCameraColumnsAreOptional) {
+  auto db = SqliteDatabase::Open(":memory:");
+  const test::FullStore s = test::WriteFullStore(*db, 10);
+  RoomMapRecord bare = s.room_map;
+  bare.camera_response.clear();
+  bare.depth_correction.clear();
+  bare.room_frame_tilt_sigma_deg.reset();
+  bare.room_frame_yaw_sigma_deg.reset();
+  bare.room_frame_couch_sigma_mm.reset();
+  const RoomMapId id = db->AddRoomMap(bare);
+  const auto back = db->GetRoomMap(id);
+  ASSERT_TRUE(back);
+  EXPECT_EQ(back->camera_response, "");
+  EXPECT_EQ(back->depth_correction, "");
+  EXPECT_FALSE(back->room_frame_tilt_sigma_deg);
+  EXPECT_FALSE(back->room_frame_yaw_sigma_deg);
+  EXPECT_FALSE(back->room_frame_couch_sigma_mm);
+  sqlite3_stmt* stmt = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db->RawHandle(),
+                               "SELECT camera_response IS NULL AND depth_correction IS NULL AND "
+                               "room_frame_tilt_sigma_deg IS NULL AND room_frame_yaw_sigma_deg IS NULL AND "
+                               "room_frame_couch_sigma_mm IS NULL FROM room_maps WHERE room_map_id = ?1",
+                               -1, &stmt, nullptr),
+            SQLITE_OK);
+  sqlite3_bind_int64(stmt, 1, id.value());
+  ASSERT_EQ(sqlite3_step(stmt), SQLITE_ROW);
+  EXPECT_EQ(sqlite3_column_int(stmt, 0), 1);
+  sqlite3_finalize(stmt);
+
+  // Only the given sigma is kept; the others stay unknown.
+  RoomMapRecord partial = bare;
+  partial.room_frame_couch_sigma_mm = 0.4;
+  const auto partial_back = db->GetRoomMap(db->AddRoomMap(partial));
+  ASSERT_TRUE(partial_back);
+  EXPECT_EQ(partial_back->room_frame_couch_sigma_mm, 0.4);
+  EXPECT_FALSE(partial_back->room_frame_tilt_sigma_deg);
+
+  RoomMapRecord negative = s.room_map;
+  negative.room_frame_yaw_sigma_deg = -0.01;
+  ExpectStoreError([&] { db->AddRoomMap(negative); }, SQLITE_CONSTRAINT_CHECK, "room_frame_yaw_sigma_deg");
+  EXPECT_EQ(RawCount(*db, "room_maps"), 3);
+}
+
 TEST(SqliteDatabase, ChildRowsAreWrittenAllOrNothing) {
   auto db = SqliteDatabase::Open(":memory:");
   const test::FullStore s = test::WriteFullStore(*db, 9);

@@ -192,6 +192,13 @@ void ExpectOldDataIntact(Database& db, const OldData& d, int version) {
   EXPECT_EQ(room_map->landmark_descriptors, d.descriptors);
   ASSERT_EQ(room_map->markers.size(), 1u);
   for (int c = 0; c < 4; ++c) EXPECT_EQ(room_map->markers[0].corners_in_room[c], d.corners[c]);
+  // 0004: a map from before knows nothing of the camera or its room frame's
+  // uncertainty (read as sRGB, no depth correction, unknown).
+  EXPECT_EQ(room_map->camera_response, "");
+  EXPECT_EQ(room_map->depth_correction, "");
+  EXPECT_FALSE(room_map->room_frame_tilt_sigma_deg);
+  EXPECT_FALSE(room_map->room_frame_yaw_sigma_deg);
+  EXPECT_FALSE(room_map->room_frame_couch_sigma_mm);
 
   const auto session = db.GetSession(SessionId(1));
   ASSERT_TRUE(session);
@@ -313,6 +320,54 @@ TEST_P(MigrateFromVersion, ReachesTheLatestWithDataIntact) {
 INSTANTIATE_TEST_SUITE_P(EveryEarlierVersion, MigrateFromVersion,
                          ::testing::Range(0, LatestSchemaVersion()),
                          [](const auto& info) { return "V" + std::to_string(info.param); });
+
+// A store written by the program of schema version 3 (room maps without the
+// camera columns) migrates in place: its rows stay, its room map gains the
+// new columns as NULL, and it takes a map with them afterwards.
+TEST(Migrations, AVersion3StoreGainsTheRoomMapCameraColumnsInPlace) {
+  TempDir dir;
+  const std::string path = (dir.path() / "v3.db").string();
+  const OldData data = MakeOldData();
+  const std::string old_columns =
+      "SELECT room_map_id, plan_id, recording_id, origin_marker_id, marker_size_m, mean_residual_px, "
+      "max_residual_px, hex(landmarks_in_room), hex(landmark_descriptors), created_unix_ms FROM room_maps "
+      "WHERE room_map_id = 1";
+  std::string old_row;
+  {
+    RawDb raw(path);
+    ASSERT_EQ(MigrateSchema(raw.get(), path, 3), 3);
+    WriteOldData(raw, data, 3);
+    EXPECT_EQ(raw.Text("SELECT name FROM pragma_table_info('room_maps') WHERE name = 'camera_response'"), "");
+    old_row = raw.Text(old_columns);
+    ASSERT_FALSE(old_row.empty());
+  }
+  {
+    auto db = SqliteDatabase::Open(path);
+    EXPECT_EQ(db->Info().schema_version, 4);
+    ExpectOldDataIntact(*db, data, 3);
+    RoomMapRecord with_camera = *db->GetRoomMap(RoomMapId(1));
+    with_camera.camera_response = "srgb: 0 1 2";
+    with_camera.depth_correction = "depth correction: 0.01 0 0 0 0 0 0";
+    with_camera.room_frame_tilt_sigma_deg = 0.02;
+    with_camera.room_frame_yaw_sigma_deg = 0.05;
+    with_camera.room_frame_couch_sigma_mm = 0.3;
+    const auto back = db->GetRoomMap(db->AddRoomMap(with_camera));
+    ASSERT_TRUE(back);
+    EXPECT_EQ(back->camera_response, "srgb: 0 1 2");
+    EXPECT_EQ(back->depth_correction, "depth correction: 0.01 0 0 0 0 0 0");
+    EXPECT_EQ(back->room_frame_tilt_sigma_deg, 0.02);
+    EXPECT_EQ(back->room_frame_yaw_sigma_deg, 0.05);
+    EXPECT_EQ(back->room_frame_couch_sigma_mm, 0.3);
+  }
+  RawDb raw(path);
+  EXPECT_EQ(ReadSchemaVersion(raw.get()), 4);
+  // The old row keeps every old column as it was; its new columns are NULL.
+  EXPECT_EQ(raw.Text(old_columns), old_row);
+  EXPECT_EQ(raw.Text("SELECT camera_response, depth_correction, room_frame_tilt_sigma_deg, "
+                     "room_frame_yaw_sigma_deg, room_frame_couch_sigma_mm FROM room_maps WHERE room_map_id = 1"),
+            "NULL|NULL|NULL|NULL|NULL|\n");
+  EXPECT_EQ(raw.Text("SELECT COUNT(*) FROM room_maps"), "2|\n");
+}
 
 TEST(Migrations, AFailingStepIsRolledBackWhole) {
   TempDir dir;

@@ -103,6 +103,12 @@ FullStore WriteFullStore(Database& database, unsigned seed) {
   s.room_map.max_residual_px = 0.9;
   s.room_map.landmarks_in_room = RandomCloud(rng, 25, false, false);
   s.room_map.landmark_descriptors = ByteMatrix::Random(25, 32);
+  // The store keeps these as opaque text (the room map layer parses them).
+  s.room_map.camera_response = "estimated: 0.0000 0.0771 " + tag;
+  s.room_map.depth_correction = "depth correction: 0.0042 0 0 0 0 0 0 " + tag;
+  s.room_map.room_frame_tilt_sigma_deg = 0.0125;
+  s.room_map.room_frame_yaw_sigma_deg = 0.031;
+  s.room_map.room_frame_couch_sigma_mm = 0.27;
   s.room_map.created_unix_ms = 1700000003000;
   s.room_map.id = database.AddRoomMap(s.room_map);
 
@@ -291,6 +297,12 @@ void ExpectFullStoreEq(Database& database, const FullStore& s) {
   }
   ExpectCloudEq(s.room_map.landmarks_in_room, room_map->landmarks_in_room);
   EXPECT_EQ(room_map->landmark_descriptors, s.room_map.landmark_descriptors);
+  EXPECT_EQ(room_map->camera_response, s.room_map.camera_response);
+  EXPECT_EQ(room_map->depth_correction, s.room_map.depth_correction);
+  EXPECT_EQ(room_map->room_frame_tilt_sigma_deg, s.room_map.room_frame_tilt_sigma_deg);
+  EXPECT_EQ(room_map->room_frame_yaw_sigma_deg, s.room_map.room_frame_yaw_sigma_deg);
+  EXPECT_EQ(room_map->room_frame_couch_sigma_mm, s.room_map.room_frame_couch_sigma_mm);
+  EXPECT_EQ(room_map->created_unix_ms, s.room_map.created_unix_ms);
   EXPECT_EQ(database.LatestRoomMap(s.plan.id), s.room_map.id);
 
   const auto session = database.GetSession(s.session.id);
