@@ -66,56 +66,32 @@ void RunCaseController::Run() {
           : options_.patient_external_id;
   const std::string case_name = patient_external.empty() ? "case" : patient_external;
 
-  Step("storing the plan", 0.15);
-  const CameraIntrinsics& camera = folder.config.camera;
-  RecordingId room_recording;
-  // Patient, plan and room recording commit together: a failure stores nothing.
-  database_->WithTransaction([&] {
-    std::optional<PatientRecord> patient = database_->FindPatient(case_name);
-    if (patient) {
-      result_.patient_id = patient->id;
-    } else {
-      PatientRecord record;
-      record.external_id = case_name;
-      record.display_name = case_name;
-      result_.patient_id = database_->AddPatient(record);
-      database_->AppendAudit({AuditId(), 0, options_.actor, "add_patient",
-                              "patient:" + std::to_string(result_.patient_id.value()),
-                              "from case " + folder.root.string()});
-    }
-    PlanRecord plan;
-    plan.patient_id = result_.patient_id;
-    plan.name = case_name + " plan";
-    plan.reference_model_name = folder.reference_model.filename().string();
-    plan.reference_model = ToStoredMesh(model);
-    plan.room_from_model_target = folder.room_from_model_target;
-    result_.plan_id = database_->AddPlan(plan);
-    database_->AppendAudit({AuditId(), 0, options_.actor, "add_plan",
-                            "plan:" + std::to_string(result_.plan_id.value()),
-                            "reference model " + plan.reference_model_name + ", target pose " +
-                                plan.room_from_model_target.ToString()});
-    RecordingRecord rec;
-    rec.kind = RecordingKind::kRoom;
-    rec.plan_id = result_.plan_id;
-    rec.name = "room";
-    rec.path = std::filesystem::absolute(folder.room_dir).lexically_normal().string();
-    rec.frame_count = static_cast<std::int64_t>(Sequence::Open(folder.room_dir).size());
-    rec.intrinsics = ToRecordingIntrinsics(camera);
-    result_.frames += static_cast<int>(rec.frame_count);
-    room_recording = database_->AddRecording(rec);
-    result_.recordings.push_back(room_recording);
-  });
-  result_.stages_done.push_back("plan stored");
-
-  Step("building the room map", 0.2);
+  // The room map is built before anything is stored, then the patient,
+  // plan, room recording and map commit together: a room that cannot be
+  // mapped leaves the store as it was.
+  Step("building the room map", 0.15);
   RoomMapStageOptions map_options;
   map_options.threads = options_.threads;
   map_options.actor = options_.actor;
-  const StoredRoomMap room_map =
-      BuildAndStoreRoomMap(database_, result_.plan_id, room_recording, folder, map_options);
-  result_.room_map_id = room_map.room_map_id;
-  result_.plan_summary = StringPrintf("room map %lld: ", static_cast<long long>(room_map.room_map_id.value())) +
-                         room_map.build.report.ToText();
+  const RoomMapBuildResult room_map = BuildCaseRoomMap(folder, map_options);
+
+  Step("storing the plan", 0.4);
+  RecordingId room_recording;
+  database_->WithTransaction([&] {
+    if (const std::optional<PatientRecord> patient = database_->FindPatient(case_name)) {
+      result_.patient_id = patient->id;
+    } else {
+      result_.patient_id = AddCasePatient(database_, folder, case_name, options_.actor);
+    }
+    result_.plan_id = AddCasePlan(database_, result_.patient_id, folder, model, case_name, options_.actor);
+    room_recording = AddRoomRecording(database_, result_.plan_id, folder);
+    result_.room_map_id = StoreRoomMap(database_, result_.plan_id, room_recording, folder, room_map, options_.actor);
+  });
+  result_.recordings.push_back(room_recording);
+  result_.frames += static_cast<int>(Sequence::Open(folder.room_dir).size());
+  result_.stages_done.push_back("plan stored");
+  result_.plan_summary = StringPrintf("room map %lld: ", static_cast<long long>(result_.room_map_id.value())) +
+                         room_map.report.ToText();
   result_.stages_done.push_back("room map");
 
   Step("session stage", 0.45);
@@ -144,6 +120,7 @@ void RunCaseController::Run() {
   result_.stages_done.push_back("alignment");
 
   Step("registering the tracking recordings", 0.9);
+  const CameraIntrinsics& camera = folder.config.camera;
   database_->WithTransaction([&] {
     for (const auto& [name, dir] : folder.tracking) {
       RecordingRecord rec;

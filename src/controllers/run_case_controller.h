@@ -2,9 +2,10 @@
 /// `arpos run-case`: runs every stage that exists on one case folder and
 /// stores every artefact in the session store.
 ///
-/// Stages, in order: validate the case (CheckCase); import the reference
-/// model and target pose into a plan (patient = the case folder's name unless
-/// given) with its room recording; build and store the room map (planning);
+/// Stages, in order: validate the case (CheckCase); build the room map
+/// (planning), then store in one transaction a plan with the reference model
+/// and target pose (patient = the case folder's name unless given), its room
+/// recording and the map, so a room that cannot be mapped stores nothing;
 /// the session stage on body_scan/ (body marker map, reconstruction, mesh,
 /// alignment: SessionController); register the tracking recordings in that
 /// session. Where the case has ground truth, the body-scan camera poses and

@@ -1,5 +1,6 @@
 #include "room_map/plan_stage.h"
 
+#include <cmath>
 #include <sstream>
 
 #include "geometry/mesh_io.h"
@@ -50,36 +51,106 @@ RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseFolder& folder, const Room
   build.use_keypoints = options.use_keypoints;
   build.max_landmarks = options.max_landmarks;
   if (options.exclude_couch) build.exclude_landmarks.push_back(CouchExclusionBox(folder.room_from_model_target));
+  build.couch_point_in_room = folder.room_from_model_target.translation;
   return build;
 }
 
-StoredRoomMap BuildAndStoreRoomMap(Database* database, PlanId plan,
-                                   std::optional<RecordingId> room_recording, const CaseFolder& folder,
-                                   const RoomMapStageOptions& options, const ControllerCallbacks& callbacks) {
-  ARPOS_CHECK(database != nullptr, "the room map stage needs a session store");
+RoomMapBuildResult BuildCaseRoomMap(const CaseFolder& folder, const RoomMapStageOptions& options,
+                                    const ControllerCallbacks& callbacks) {
   const std::string problem = options.Check();
   if (!problem.empty()) ARPOS_INPUT_ERROR("room map: " << problem);
-  if (!database->GetPlan(plan)) ARPOS_INPUT_ERROR("the store has no plan " << plan.value());
   if (!std::filesystem::is_directory(folder.room_dir)) {
     ARPOS_INPUT_ERROR(folder.room_dir.string() << ": no room sequence (the room map is built from room/)");
   }
   const Sequence room = Sequence::Open(folder.room_dir);
-  StoredRoomMap stored;
-  stored.build = BuildRoomMap(room, folder.config, MakeRoomMapBuildOptions(folder, options), callbacks);
-  const RoomMapRecord record = ToRecord(stored.build.map, plan, room_recording);
+  return BuildRoomMap(room, folder.config, MakeRoomMapBuildOptions(folder, options), callbacks);
+}
+
+namespace {
+
+// The builder leaves a sigma infinite when it could not measure it; the
+// store keeps that as "not measured".
+std::optional<double> Measured(double value) {
+  return std::isfinite(value) ? std::optional<double>(value) : std::nullopt;
+}
+
+// Report lines go into one line of audit details.
+std::string OneLine(std::string text) {
+  for (char& c : text) {
+    if (c == '\n') c = ' ';
+  }
+  return text;
+}
+
+}  // namespace
+
+RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingId> room_recording,
+                       const CaseFolder& folder, const RoomMapBuildResult& build, const std::string& actor) {
+  ARPOS_CHECK(database != nullptr, "the room map stage needs a session store");
+  const RoomMap& map = build.map;
+  const RoomMapBuildReport& r = build.report;
+  RoomMapRecord record = ToRecord(map, plan, room_recording);
+  record.room_frame_tilt_sigma_deg = Measured(r.room_frame_tilt_sigma_deg);
+  record.room_frame_yaw_sigma_deg = Measured(r.room_frame_yaw_sigma_deg);
+  record.room_frame_couch_sigma_mm = Measured(r.room_frame_couch_sigma_mm);
+  std::string details = StringPrintf(
+      "plan %lld, %zu markers (origin %d), %d landmarks, marker residual mean %.3f px max %.3f px, "
+      "%d/%d frames, depth scale %.4f, from %s",
+      static_cast<long long>(plan.value()), map.markers.size(), map.origin_marker_id, map.num_landmarks(),
+      map.mean_residual_px, map.max_residual_px, r.frames_used, r.frames_total, r.depth_scale_ratio,
+      folder.room_dir.string().c_str());
+  details += StringPrintf("; room frame (origin marker, %d views): tilt %.4f deg, yaw %.4f deg, position at the "
+                          "couch %.3f mm (1 sigma)",
+                          r.origin_observations, r.room_frame_tilt_sigma_deg, r.room_frame_yaw_sigma_deg,
+                          r.room_frame_couch_sigma_mm);
+  if (!r.camera_response.empty()) details += "; " + OneLine(r.camera_response);
+  if (!r.depth_correction.empty()) details += "; " + OneLine(r.depth_correction);
+  RoomMapId id;
   database->WithTransaction([&] {
-    stored.room_map_id = database->AddRoomMap(record);
-    const RoomMapBuildReport& r = stored.build.report;
+    id = database->AddRoomMap(record);
     database->AppendAudit(
-        {AuditId(), 0, options.actor, "build_room_map", "room_map:" + std::to_string(stored.room_map_id.value()),
-         StringPrintf("plan %lld, %zu markers (origin %d), %d landmarks, marker residual mean %.3f px max %.3f px, "
-                      "%d/%d frames, depth scale %.4f, from %s",
-                      static_cast<long long>(plan.value()), stored.build.map.markers.size(),
-                      stored.build.map.origin_marker_id, stored.build.map.num_landmarks(),
-                      stored.build.map.mean_residual_px, stored.build.map.max_residual_px, r.frames_used,
-                      r.frames_total, r.depth_scale_ratio, folder.room_dir.string().c_str())});
+        {AuditId(), 0, actor, "build_room_map", "room_map:" + std::to_string(id.value()), details});
   });
-  return stored;
+  return id;
+}
+
+PatientId AddCasePatient(Database* database, const CaseFolder& folder, const std::string& external_id,
+                         const std::string& actor) {
+  PatientRecord record;
+  record.external_id = external_id;
+  record.display_name = external_id;
+  const PatientId id = database->AddPatient(record);
+  database->AppendAudit({AuditId(), 0, actor, "add_patient", "patient:" + std::to_string(id.value()),
+                         "from case " + folder.root.string()});
+  return id;
+}
+
+PlanId AddCasePlan(Database* database, PatientId patient, const CaseFolder& folder, const TriangleMesh& model,
+                   const std::string& case_name, const std::string& actor) {
+  PlanRecord plan;
+  plan.patient_id = patient;
+  plan.name = case_name + " plan";
+  plan.reference_model_name = folder.reference_model.filename().string();
+  plan.reference_model = ToStoredMesh(model);
+  plan.room_from_model_target = folder.room_from_model_target;
+  const PlanId id = database->AddPlan(plan);
+  database->AppendAudit({AuditId(), 0, actor, "add_plan", "plan:" + std::to_string(id.value()),
+                         "reference model " + plan.reference_model_name + ", target pose " +
+                             plan.room_from_model_target.ToString()});
+  return id;
+}
+
+RecordingId AddRoomRecording(Database* database, PlanId plan, const CaseFolder& folder) {
+  RecordingRecord rec;
+  rec.kind = RecordingKind::kRoom;
+  rec.plan_id = plan;
+  rec.name = "room";
+  rec.path = std::filesystem::absolute(folder.room_dir).lexically_normal().string();
+  rec.frame_count = std::filesystem::is_directory(folder.room_dir)
+                        ? static_cast<std::int64_t>(Sequence::Open(folder.room_dir).size())
+                        : 0;
+  rec.intrinsics = ToRecordingIntrinsics(folder.config.camera);
+  return database->AddRecording(rec);
 }
 
 std::string PlanRoomMapResult::Summary() const {
@@ -114,66 +185,39 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
   const CaseFolder folder = LoadCaseFolder(options.case_dir);
   const std::string patient_name =
       options.patient_external_id.empty() ? CasePatientId(folder.root) : options.patient_external_id;
-  PlanRoomMapResult result;
+  // Fail before the long build on what the store can already tell.
+  if (options.plan_id && !database->GetPlan(*options.plan_id)) {
+    ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
+  }
 
-  if (options.plan_id) {
-    const std::optional<PlanRecord> plan = database->GetPlan(*options.plan_id);
-    if (!plan) ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
-    result.plan_id = plan->id;
-    result.patient_id = plan->patient_id;
-  } else {
-    const std::optional<PatientRecord> patient = database->FindPatient(patient_name);
-    if (patient) {
+  PlanRoomMapResult result;
+  result.build = BuildCaseRoomMap(folder, options.stage, callbacks);
+
+  // Everything planning stores commits together, after the map exists: a
+  // room that cannot be mapped leaves no patient, plan or recording behind.
+  // The lookups run inside the transaction (which holds the write lock), so
+  // another program planning the same case meanwhile is seen.
+  const std::string& actor = options.stage.actor;
+  database->WithTransaction([&] {
+    if (options.plan_id) {
+      const std::optional<PlanRecord> plan = database->GetPlan(*options.plan_id);
+      if (!plan) ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
+      result.plan_id = plan->id;
+      result.patient_id = plan->patient_id;
+    } else if (const std::optional<PatientRecord> patient = database->FindPatient(patient_name)) {
       result.patient_id = patient->id;
       const std::vector<PlanSummary> plans = database->ListPlans(patient->id, 1);
       if (!plans.empty()) result.plan_id = plans.front().id;
     }
-  }
-  // Patient, plan and room recording commit together.
-  database->WithTransaction([&] {
-    if (!result.patient_id.valid()) {
-      PatientRecord record;
-      record.external_id = patient_name;
-      record.display_name = patient_name;
-      result.patient_id = database->AddPatient(record);
-      database->AppendAudit({AuditId(), 0, options.stage.actor, "add_patient",
-                             "patient:" + std::to_string(result.patient_id.value()),
-                             "from case " + folder.root.string()});
-    }
+    if (!result.patient_id.valid()) result.patient_id = AddCasePatient(database, folder, patient_name, actor);
     if (!result.plan_id.valid()) {
-      const TriangleMesh model = LoadTriangleMesh(folder.reference_model);
-      PlanRecord plan;
-      plan.patient_id = result.patient_id;
-      plan.name = patient_name + " plan";
-      plan.reference_model_name = folder.reference_model.filename().string();
-      plan.reference_model.vertices = model.vertices;
-      for (const auto& f : model.faces) {
-        plan.reference_model.faces.push_back({static_cast<std::uint32_t>(f[0]), static_cast<std::uint32_t>(f[1]),
-                                              static_cast<std::uint32_t>(f[2])});
-      }
-      plan.room_from_model_target = folder.room_from_model_target;
-      result.plan_id = database->AddPlan(plan);
+      result.plan_id = AddCasePlan(database, result.patient_id, folder, LoadTriangleMesh(folder.reference_model),
+                                   patient_name, actor);
       result.created_plan = true;
-      database->AppendAudit({AuditId(), 0, options.stage.actor, "add_plan",
-                             "plan:" + std::to_string(result.plan_id.value()),
-                             "reference model " + plan.reference_model_name + ", target pose " +
-                                 plan.room_from_model_target.ToString()});
     }
-    RecordingRecord rec;
-    rec.kind = RecordingKind::kRoom;
-    rec.plan_id = result.plan_id;
-    rec.name = "room";
-    rec.path = std::filesystem::absolute(folder.room_dir).lexically_normal().string();
-    rec.frame_count = std::filesystem::is_directory(folder.room_dir)
-                          ? static_cast<std::int64_t>(Sequence::Open(folder.room_dir).size())
-                          : 0;
-    rec.intrinsics = ToRecordingIntrinsics(folder.config.camera);
-    result.recording_id = database->AddRecording(rec);
+    result.recording_id = AddRoomRecording(database, result.plan_id, folder);
+    result.room_map_id = StoreRoomMap(database, result.plan_id, result.recording_id, folder, result.build, actor);
   });
-  StoredRoomMap stored =
-      BuildAndStoreRoomMap(database, result.plan_id, result.recording_id, folder, options.stage, callbacks);
-  result.room_map_id = stored.room_map_id;
-  result.build = std::move(stored.build);
   return result;
 }
 

@@ -1,8 +1,12 @@
 #pragma once
 /// The planning stage with the session store: build the room map of a case
 /// and store it as a RoomMapRecord of a plan; load the map back for
-/// localisation. Used by `arpos plan`, `arpos localize` and (through
-/// BuildAndStoreRoomMap) the run-case controller.
+/// localisation. Used by `arpos plan`, `arpos localize` and the run-case
+/// controller.
+///
+/// The map is built before anything is stored: a case whose room cannot be
+/// mapped leaves the store as it was. The patient, plan, room recording, room
+/// map and their audit entries are then written in one transaction.
 ///
 /// Patients and plans follow the run-case controller's convention: the
 /// patient's external id is the case folder's name unless given; a plan
@@ -14,6 +18,7 @@
 #include <string>
 
 #include "controllers/controller.h"
+#include "geometry/triangle_mesh.h"
 #include "room_map/room_map.h"
 #include "room_map/room_map_builder.h"
 #include "sensor/case_folder.h"
@@ -39,23 +44,36 @@ struct RoomMapStageOptions {
 /// The builder's options for `folder` with the stage options applied.
 RoomMapBuildOptions MakeRoomMapBuildOptions(const CaseFolder& folder, const RoomMapStageOptions& options);
 
-struct StoredRoomMap {
-  RoomMapId room_map_id;
-  RoomMapBuildResult build;
-};
+/// Builds the map of `folder.room_dir`; needs no store. Throws InputError (no
+/// room sequence, unreadable frame, origin marker never seen), Cancelled.
+RoomMapBuildResult BuildCaseRoomMap(const CaseFolder& folder, const RoomMapStageOptions& options,
+                                    const ControllerCallbacks& callbacks = {});
 
-/// Builds the map from `folder.room_dir` and stores it under `plan`
-/// (`room_recording`: the stored room recording it was built from, if any),
-/// with an audit entry. The map is stored in one transaction after it is
-/// built. Throws InputError (unreadable frame, origin marker never seen, no
-/// such plan), Cancelled.
-StoredRoomMap BuildAndStoreRoomMap(Database* database, PlanId plan,
-                                   std::optional<RecordingId> room_recording, const CaseFolder& folder,
-                                   const RoomMapStageOptions& options,
-                                   const ControllerCallbacks& callbacks = {});
+/// Stores a built map under `plan` (`room_recording`: the stored room
+/// recording it was built from, if any) with its `build_room_map` audit
+/// entry, atomically; inside a caller's WithTransaction it commits with the
+/// caller's other rows. The record also carries the room frame's uncertainty
+/// from `build.report` (empty where the build could not measure it).
+RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingId> room_recording,
+                       const CaseFolder& folder, const RoomMapBuildResult& build, const std::string& actor);
+
+/// The rows planning creates for a case, shared by `arpos plan` and run-case;
+/// call them inside the caller's transaction. The patient and the plan come
+/// with their audit entries (add_patient, add_plan).
+/// A patient with external id `external_id` (display name the same).
+PatientId AddCasePatient(Database* database, const CaseFolder& folder, const std::string& external_id,
+                         const std::string& actor);
+/// A plan named "<case_name> plan" holding `model` (the case's reference
+/// model, model frame, metres) and the case's target pose.
+PlanId AddCasePlan(Database* database, PatientId patient, const CaseFolder& folder, const TriangleMesh& model,
+                   const std::string& case_name, const std::string& actor);
+/// The case's room/ sequence as the room recording of `plan`.
+RecordingId AddRoomRecording(Database* database, PlanId plan, const CaseFolder& folder);
 
 /// `arpos plan CASE`: the case's patient and plan (created if the store has
 /// none for the case, or the given plan), the room recording, the map.
+/// Builds the map first, then writes every row in one transaction; throws
+/// (InputError, Cancelled, StoreError) with nothing stored.
 struct PlanRoomMapOptions {
   std::filesystem::path case_dir;
   std::optional<PlanId> plan_id;    ///< else the newest plan of the case's patient, created if none

@@ -92,6 +92,8 @@ RoomMapRecord ToRecord(const RoomMap& map, PlanId plan, std::optional<RecordingI
                   record.landmark_descriptors.row(r).data());
     }
   }
+  record.camera_response = map.camera_response.Serialize();
+  record.depth_correction = map.depth_correction.Serialize();
   return record;
 }
 
@@ -142,8 +144,17 @@ RoomMap FromRecord(const RoomMapRecord& record) {
                   map.landmark_descriptors.ptr<std::uint8_t>(r));
     }
   }
+  // Empty: a map stored before the store kept these (schema version 4); the
+  // RoomMap defaults are what such a map was used with.
+  const std::string where = "room map " + std::to_string(record.id.value());
+  if (!record.camera_response.empty()) {
+    map.camera_response = CameraResponse::Parse(record.camera_response, where + ": stored camera response");
+  }
+  if (!record.depth_correction.empty()) {
+    map.depth_correction = DepthCorrection::Parse(record.depth_correction, where + ": stored depth correction");
+  }
   const std::string problem = map.Validate();
-  if (!problem.empty()) ARPOS_INPUT_ERROR("room map " << record.id.value() << ": " << problem);
+  if (!problem.empty()) ARPOS_INPUT_ERROR(where << ": " << problem);
   return map;
 }
 

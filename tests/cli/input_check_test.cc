@@ -8,6 +8,9 @@
 #include <filesystem>
 #include <string>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
 #include "cli/cli_util.h"
 #include "geometry/mesh_io.h"
 #include "sensor/tum_io.h"
@@ -183,6 +186,57 @@ TEST_F(CliInputChecks, PlanWaitsForALockedStoreAndStoresItsWork) {
   EXPECT_TRUE(Contains(r.output, store() + ": the store is locked by another program; waiting up to 60 s"))
       << r.output;
   EXPECT_TRUE(Contains(StoreInfo(), "plan 1 ")) << StoreInfo();
+}
+
+// Rows of `table` in the store file at `path` (opened read-only, as another
+// program would look at it).
+std::int64_t StoredRows(const std::string& path, const std::string& table) {
+  sqlite3* db = nullptr;
+  std::int64_t count = -1;
+  if (sqlite3_open_v2(path.c_str(), &db, SQLITE_OPEN_READONLY, nullptr) == SQLITE_OK) {
+    sqlite3_stmt* stmt = nullptr;
+    if (sqlite3_prepare_v2(db, ("SELECT COUNT(*) FROM " + table).c_str(), -1, &stmt, nullptr) == SQLITE_OK &&
+        sqlite3_step(stmt) == SQLITE_ROW) {
+      count = sqlite3_column_int64(stmt, 0);
+    }
+    sqlite3_finalize(stmt);
+  }
+  sqlite3_close(db);
+  return count;
+}
+
+// A room recording that cannot be mapped used to leave the patient, the plan
+// and the room recording stored: they were written before the map was built.
+TEST_F(CliInputChecks, PlanThatCannotMapTheRoomStoresNothing) {
+  // Every room colour image a uniform grey of the same size: valid images
+  // (the case check passes), but no marker anywhere.
+  int replaced = 0;
+  for (const auto& entry : fs::directory_iterator(case_dir() / "room" / "rgb")) {
+    const cv::Mat image = cv::imread(entry.path().string(), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(image.empty()) << entry.path();
+    ASSERT_TRUE(cv::imwrite(entry.path().string(), cv::Mat(image.size(), image.type(), cv::Scalar::all(128))));
+    ++replaced;
+  }
+  ASSERT_GT(replaced, 0);
+  const CliResult r = RunArpos("plan " + Case() + " --store " + store());
+  ExpectAnInputError(r);
+  EXPECT_TRUE(Contains(r.output, "arpos plan: error: ")) << r.output;
+  EXPECT_TRUE(Contains(r.output, "the origin marker (id 0, case.yaml markers.room.origin_id) is never seen"))
+      << r.output;
+  EXPECT_FALSE(Contains(r.output, "room map 1 stored")) << r.output;
+  for (const char* table : {"patients", "plans", "recordings", "room_maps", "audit_log"}) {
+    EXPECT_EQ(StoredRows(store(), table), 0) << table << " after `arpos plan`:\n" << r.output;
+  }
+  EXPECT_TRUE(Contains(StoreInfo(), "Latest plans: none")) << StoreInfo();
+
+  // run-case plans the same way.
+  const CliResult run = RunArpos("run-case --quick " + Case() + " --store " + store());
+  ExpectAnInputError(run);
+  EXPECT_TRUE(Contains(run.output, "the origin marker (id 0, case.yaml markers.room.origin_id) is never seen"))
+      << run.output;
+  for (const char* table : {"patients", "plans", "recordings", "room_maps", "sessions", "audit_log"}) {
+    EXPECT_EQ(StoredRows(store(), table), 0) << table << " after `arpos run-case`:\n" << run.output;
+  }
 }
 
 // `evaluate` with nothing matched used to print MTE 0.000 with 100 % lost.
