@@ -39,20 +39,6 @@ std::vector<Curve> Curves() {
           {"scurve", SCurveEncode}};
 }
 
-/// The truth as a response table (code -> linear), by inverting `encode`.
-CameraResponse TrueResponse(const std::function<double(double)>& encode) {
-  std::array<double, 256> table{};
-  for (int v = 0; v < 256; ++v) {
-    double lo = 0, hi = 1;
-    for (int i = 0; i < 60; ++i) {
-      const double mid = 0.5 * (lo + hi);
-      (encode(mid) < v / 255.0 ? lo : hi) = mid;
-    }
-    table[v] = 255 * 0.5 * (lo + hi);
-  }
-  return CameraResponse::FromTable(table, "truth");
-}
-
 /// A small "recording": frames of several markers each, at random sizes,
 /// tilts, blur, and exposure (the printed black and white levels vary as
 /// under auto exposure and uneven light).
@@ -165,7 +151,7 @@ TEST(CameraResponse, EstimatedFromMarkerEdgesForEachToneCurve) {
     int n_assumed = 0, n_est = 0, n_true = 0;
     const double assumed = CornerScaleBiasPx(rec, CameraResponse::Srgb(), &n_assumed);
     const double estimated = CornerScaleBiasPx(rec, est.response, &n_est);
-    const double truth = CornerScaleBiasPx(rec, TrueResponse(curve.encode), &n_true);
+    const double truth = CornerScaleBiasPx(rec, ResponseOfEncoding(curve.encode), &n_true);
     std::printf(
         "%-9s corner scale bias: sRGB assumed %+.3f px, estimated %+.3f px, true curve %+.3f px "
         "(%d corners); %s\n",

@@ -150,19 +150,10 @@ void RunReport(bool quick) {
       for (const StudyImage& img : images) frames.push_back({img.image, detector.Detect(img.image)});
       const RecordingResponse estimated =
           EstimateResponseFromFrames(frames, MarkerDetectorOptions(), CameraResponse::Srgb());
-      std::array<double, 256> truth{};
-      for (int v = 0; v < 256; ++v) {
-        double lo = 0, hi = 1;
-        for (int i = 0; i < 60; ++i) {
-          const double mid = 0.5 * (lo + hi);
-          (encode(mid) < v / 255.0 ? lo : hi) = mid;
-        }
-        truth[v] = 255 * 0.5 * (lo + hi);
-      }
       const std::pair<const char*, CameraResponse> uses[] = {
           {"sRGB assumed", CameraResponse::Srgb()},
           {"estimated", estimated.response},
-          {"true curve", CameraResponse::FromTable(truth, "truth")}};
+          {"true curve", ResponseOfEncoding(encode)}};
       for (const auto& [what, response] : uses) {
         MarkerDetectorOptions o;
         o.edge.response = response;

@@ -291,6 +291,19 @@ cv::Mat RenderMarkers(const CameraIntrinsics& camera, const std::vector<MarkerPl
   return out;
 }
 
+CameraResponse ResponseOfEncoding(const std::function<double(double)>& encode) {
+  std::array<double, 256> table{};
+  for (int v = 0; v < 256; ++v) {
+    double lo = 0, hi = 1;
+    for (int i = 0; i < 60; ++i) {
+      const double mid = 0.5 * (lo + hi);
+      (encode(mid) < v / 255.0 ? lo : hi) = mid;
+    }
+    table[v] = 255 * 0.5 * (lo + hi);
+  }
+  return CameraResponse::FromTable(table, "truth");
+}
+
 Rigid3d MarkerPoseForView(const CameraIntrinsics& camera, const Eigen::Vector2d& centre_px,
                           double side_px, double size_m, double tilt_deg, std::mt19937* rng) {
   std::uniform_real_distribution<double> angle(0, 2 * M_PI);

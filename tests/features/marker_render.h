@@ -20,6 +20,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "features/camera_response.h"
 #include "geometry/rigid3.h"
 #include "sensor/intrinsics.h"
 
@@ -58,6 +59,10 @@ struct RenderOptions {
   /// monotone increasing; overrides `gamma` when set.
   std::function<double(double)> encode;
 };
+
+/// The camera response (code -> linear table) of a monotone encoding
+/// (linear fraction -> encoded fraction), by inverting it.
+CameraResponse ResponseOfEncoding(const std::function<double(double)>& encode);
 
 /// Renders `markers` into a CV_8UC1 image of the camera's size. `truth` gets
 /// one entry per marker. Markers must not overlap (not checked).
