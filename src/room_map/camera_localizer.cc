@@ -88,6 +88,9 @@ CameraLocalizerOptions MakeCameraLocalizerOptions(const CaseConfig& config) {
   options.detector.dictionary = config.dictionary;
   options.detector.id_ranges = {{config.room_markers.id_min, config.room_markers.id_max}};
   options.detector.intrinsics = config.camera;
+  // Colour cameras mostly encode sRGB; callers set the recording's own
+  // estimate (features/response_from_recording.h) when they have one.
+  options.detector.edge.response = CameraResponse::Srgb();
   return options;
 }
 
