@@ -1033,6 +1033,20 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     report.warnings.push_back(StringPrintf("%d of %d frames could not be posed and were left out",
                                            report.frames_total - report.frames_used, report.frames_total));
   }
+  // A map that places only a small part of the room recording (the origin
+  // marker never seen together with the rest: measured on simulated cases,
+  // 5 of 60 frames, the origin alone) cannot localise a session: refused,
+  // saying what to record, rather than stored.
+  if (report.frames_with_markers > 0 && 3 * report.frames_used < report.frames_with_markers &&
+      map.markers.size() < 3) {
+    ARPOS_INPUT_ERROR(sequence.folder().string()
+                      << ": only " << report.frames_used << " of " << report.frames_total
+                      << " frames could be placed in the room frame (" << map.markers.size()
+                      << " marker(s) mapped; markers seen but never linked to the origin marker id "
+                      << origin_id << ": " << report.unconnected_markers.size()
+                      << "): record the room again with views that show the origin marker together "
+                         "with other room markers, e.g. walking from it to the couch");
+  }
   const std::string problem = map.Validate();
   ARPOS_CHECK(problem.empty(), "built an inconsistent room map: " << problem);
   report.total_s = SecondsSince(t_start);
