@@ -102,6 +102,16 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (max_landmarks < 0) out << "max_landmarks must not be negative";
   else if (!(landmark_voxel_m > 0)) out << "landmark_voxel_m must be positive";
   else if (!(outlier_sigmas > 0)) out << "outlier_sigmas must be positive";
+  else if (!(depth_inflation_threshold >= 1)) out << "depth_inflation_threshold must be at least 1";
+  else if (!(max_room_frame_tilt_sigma_deg > 0) || !(max_room_frame_couch_sigma_mm > 0)) {
+    out << "room frame tolerances must be positive";
+  } else if (!couch_point_in_room.allFinite()) {
+    out << "couch_point_in_room must be finite";
+  } else if (const std::string r2 = response.estimation.Validate(); !r2.empty()) {
+    out << "response.estimation: " << r2;
+  } else if (response.max_frames < 1 || response.rounds < 1) {
+    out << "response: max_frames and rounds must be positive";
+  }
   return out.str();
 }
 
