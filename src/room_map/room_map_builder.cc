@@ -169,9 +169,15 @@ std::string RoomMapBuildReport::ToText() const {
                       frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
   out << StringPrintf(
       "room frame (origin marker, %d views): tilt %.4f deg, yaw %.4f deg, position at the couch "
-      "%.3f mm (1 sigma)\n",
+      "%.3f mm (1 sigma)",
       origin_observations, room_frame_tilt_sigma_deg, room_frame_yaw_sigma_deg,
       room_frame_couch_sigma_mm);
+  if (coplanar_markers > 0) {
+    out << StringPrintf("; tilt from the origin's views and the plane of %d markers coplanar with it "
+                        "(turned %.3f deg)",
+                        coplanar_markers, coplanar_turn_deg);
+  }
+  out << "\n";
   if (!camera_response.empty()) out << camera_response << "\n";
   if (!depth_correction.empty()) out << depth_correction << "\n";
   for (const auto& w : warnings) out << "warning: " << w << "\n";
@@ -913,11 +919,73 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       report.room_frame_covariance = cov;
       report.room_frame_couch_sigma_mm = report.RoomFramePositionSigmaMm(options.couch_point_in_room);
     }
+    // Markers coplanar with the origin (the floor, or the wall it is on)
+    // constrain its tilt too: their centres, spread over metres, fix the
+    // plane's tilt far better than a small, rarely seen origin's own views.
+    // Fused by inverse variance (floor flatness allowed for) when the
+    // origin's own tilt is weaker than the tolerance; the room frame turns
+    // onto the fused plane about the origin's centre.
+    if (options.use_coplanar_markers && report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg &&
+        std::isfinite(report.room_frame_tilt_sigma_deg)) {
+      const Rigid3d origin_from_room = ba.room_from_marker[slot].Inverse();
+      std::vector<Eigen::Vector3d> centres;
+      for (size_t m = 0; m < ba.room_from_marker.size(); ++m) {
+        if (static_cast<int>(m) == slot) continue;
+        const Rigid3d origin_from_marker = origin_from_room * ba.room_from_marker[m];
+        const Eigen::Vector3d normal = origin_from_marker.rotation * Eigen::Vector3d::UnitZ();
+        const Eigen::Vector3d c = origin_from_marker.translation;
+        if (normal.z() > std::cos(5 * M_PI / 180) && std::abs(c.z()) < 0.03) centres.push_back(c);
+      }
+      Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
+      Eigen::Vector2d atb = Eigen::Vector2d::Zero();
+      for (const Eigen::Vector3d& c : centres) {
+        ata += c.head<2>() * c.head<2>().transpose();
+        atb += c.head<2>() * c.z();
+      }
+      if (centres.size() >= 2 && ata.determinant() > 0.25) {  // spread over ~1 m in both directions
+        const Eigen::Vector2d slope = ata.ldlt().solve(atb);  // z = a x + b y
+        double rss = 0;
+        for (const Eigen::Vector3d& c : centres) rss += std::pow(c.z() - slope.dot(c.head<2>()), 2);
+        const double flat_sigma = std::max(options.coplanar_flatness_m,
+                                           std::sqrt(rss / std::max<double>(1, centres.size() - 2)));
+        const Eigen::Matrix2d slope_cov = ata.inverse() * flat_sigma * flat_sigma;
+        // The plane's normal as a rotation of z: omega = z x (-a, -b, 1) = (b, -a).
+        const Eigen::Vector2d omega_plane(slope.y(), -slope.x());
+        Eigen::Matrix2d flip;
+        flip << 0, 1, -1, 0;
+        const Eigen::Matrix2d plane_cov = flip * slope_cov * flip.transpose();
+        const Eigen::Matrix2d own_cov = report.room_frame_covariance.topLeftCorner<2, 2>();
+        const Eigen::Matrix2d fused_info = own_cov.inverse() + plane_cov.inverse();
+        const Eigen::Matrix2d fused_cov = fused_info.inverse();
+        const Eigen::Vector2d omega = fused_cov * plane_cov.inverse() * omega_plane;
+        if (omega.allFinite() && fused_cov.allFinite()) {
+          // New room frame = the origin frame turned by omega about its centre.
+          const Rigid3d turned = Rigid3d::FromRotationVector(Eigen::Vector3d(omega.x(), omega.y(), 0),
+                                                             Eigen::Vector3d::Zero());
+          const Rigid3d new_from_room = turned.Inverse() * origin_from_room;
+          const Rigid3d room_from_new = new_from_room.Inverse();
+          for (size_t m = 0; m < ba.room_from_marker.size(); ++m) {
+            ba.room_from_marker[m] = static_cast<int>(m) == slot ? Rigid3d::Identity()
+                                                                 : new_from_room * ba.room_from_marker[m];
+          }
+          for (Rigid3d& c : ba.camera_from_room) c = c * room_from_new;
+          for (Eigen::Vector3d& l : ba.landmarks_in_room) l = new_from_room * l;
+          report.room_frame_covariance.topLeftCorner<2, 2>() = fused_cov;
+          report.room_frame_covariance.block<2, 4>(0, 2).setZero();
+          report.room_frame_covariance.block<4, 2>(2, 0).setZero();
+          const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> tilt(fused_cov);
+          report.room_frame_tilt_sigma_deg = std::sqrt(std::max(0.0, tilt.eigenvalues().maxCoeff())) * 180 / M_PI;
+          report.room_frame_couch_sigma_mm = report.RoomFramePositionSigmaMm(options.couch_point_in_room);
+          report.coplanar_markers = static_cast<int>(centres.size());
+          report.coplanar_turn_deg = omega.norm() * 180 / M_PI;
+        }
+      }
+    }
     if (!(report.room_frame_tilt_sigma_deg <= options.max_room_frame_tilt_sigma_deg) ||
         !(report.room_frame_couch_sigma_mm <= options.max_room_frame_couch_sigma_mm)) {
       report.warnings.push_back(StringPrintf(
-          "the room frame is weakly determined: the origin marker (id %d, %d views) fixes its tilt to "
-          "%.3f deg and the couch position to %.2f mm (1 sigma; tolerances %.3f deg, %.2f mm); "
+          "the room frame is weakly determined: from the origin marker (id %d, %d views) its tilt is "
+          "known to %.3f deg and the couch position to %.2f mm (1 sigma; tolerances %.3f deg, %.2f mm); "
           "record the room again with a few close, sharp views of the origin marker from different "
           "sides",
           origin_id, used, report.room_frame_tilt_sigma_deg, report.room_frame_couch_sigma_mm,

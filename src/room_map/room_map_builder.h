@@ -115,6 +115,11 @@ struct RoomMapBuildOptions {
   Eigen::Vector3d couch_point_in_room = Eigen::Vector3d::Zero();
   double max_room_frame_tilt_sigma_deg = 0.05;
   double max_room_frame_couch_sigma_mm = 0.5;
+  /// When the origin's own tilt is weaker than the tolerance, fuse the plane
+  /// of the markers coplanar with it (within 5 deg and 3 cm), allowing this
+  /// much unflatness of the floor or wall (m, 1 sigma).
+  bool use_coplanar_markers = true;
+  double coplanar_flatness_m = 0.002;
 
   /// Observations with a reprojection error above this many sigmas after the
   /// first joint adjustment are dropped before the second.
@@ -167,6 +172,10 @@ struct RoomMapBuildReport {
   /// m; room frame); infinite when it has no observation.
   Eigen::Matrix<double, 6, 6> room_frame_covariance =
       Eigen::Matrix<double, 6, 6>::Constant(std::numeric_limits<double>::infinity());
+  /// Markers coplanar with the origin whose plane was fused into the room
+  /// frame's tilt (0: not used), and how far that turned the frame.
+  int coplanar_markers = 0;
+  double coplanar_turn_deg = 0;
   /// 1-sigma position error (mm) the room frame's uncertainty gives at a point.
   double RoomFramePositionSigmaMm(const Eigen::Vector3d& point_in_room) const;
   /// Camera poses of the used frames (sequence index, room_from_camera).
