@@ -4,7 +4,6 @@
 #include <map>
 
 #include <opencv2/aruco.hpp>
-
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
