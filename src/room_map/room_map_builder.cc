@@ -750,20 +750,24 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     vision_options.use_keypoint_depth = false;
     BaProblem vision = ba;
     RunBundleAdjustment(&vision, vision_options);
+    auto normalised = [&](double u, double v) {  // ideal pixel -> normalised image coordinates
+      return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
+    };
     std::vector<DepthComparison> comparisons;
     for (const BaKeypointObservation& o : vision.keypoint_observations) {
       if (!(o.depth_m > 0)) continue;
       const double expected = (vision.camera_from_room[o.camera] * vision.landmarks_in_room[o.landmark]).z();
       if (!(expected > 0.1)) continue;
-      comparisons.push_back({(o.pixel.x() - K.cx) / K.fx, (o.pixel.y() - K.cy) / K.fy, o.depth_m, expected,
-                             joint_options.DepthSigmaM(expected)});
+      const Eigen::Vector2d xy = normalised(o.pixel.x(), o.pixel.y());
+      comparisons.push_back({xy.x(), xy.y(), o.depth_m, expected, joint_options.DepthSigmaM(expected)});
     }
     for (const BaMarkerObservation& o : vision.marker_observations) {
       const Rigid3d camera_from_marker = vision.camera_from_room[o.camera] * vision.room_from_marker[o.marker];
       const Eigen::Vector3d n = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
       const double d = n.dot(camera_from_marker.translation);
       for (const DepthSample& sample : o.depth_samples) {
-        const double x = (sample.pixel.x() - K.cx) / K.fx, y = (sample.pixel.y() - K.cy) / K.fy;
+        const Eigen::Vector2d xy = normalised(sample.pixel.x(), sample.pixel.y());
+        const double x = xy.x(), y = xy.y();
         const double denom = n.dot(Eigen::Vector3d(x, y, 1));
         if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
         const double expected = d / denom;
@@ -791,7 +795,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       result.map.depth_correction = fit.correction;
       const DepthCorrection& c = fit.correction;
       auto correct = [&](double z, double u, double v) {
-        return c.TrueDepth(z, (u - K.cx) / K.fx, (v - K.cy) / K.fy);
+        const Eigen::Vector2d xy = normalised(u, v);
+        return c.TrueDepth(z, xy.x(), xy.y());
       };
       for (BaKeypointObservation& o : ba.keypoint_observations) {
         if (o.depth_m > 0) o.depth_m = correct(o.depth_m, o.pixel.x(), o.pixel.y());
@@ -799,14 +804,6 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       for (BaMarkerObservation& o : ba.marker_observations) {
         for (DepthSample& sample : o.depth_samples) {
           sample.depth_m = static_cast<float>(correct(sample.depth_m, sample.pixel.x(), sample.pixel.y()));
-        }
-      }
-      // The frames' own copies (the observations are collected again below).
-      for (FrameData& f : frames) {
-        for (auto& samples : f.depth_samples) {
-          for (DepthSample& sample : samples) {
-            sample.depth_m = static_cast<float>(correct(sample.depth_m, sample.pixel.x(), sample.pixel.y()));
-          }
         }
       }
     }
