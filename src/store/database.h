@@ -134,7 +134,9 @@ class Database {
   virtual TrackingRunId AddTrackingRun(const TrackingRunRecord& run) = 0;
   virtual std::optional<TrackingRunRecord> GetTrackingRun(TrackingRunId id) = 0;
   /// Appends a batch of frames to a run in one transaction: all or none.
-  /// Frame indices must be new within the run.
+  /// Frame indices must be new within the run. Throws arpos::Error before
+  /// writing anything if a frame breaks the rules of TrackingFrameRecord
+  /// (pose, correction, uncertainty and source against its status; total_ms).
   virtual void AppendTrackingFrames(TrackingRunId run,
                                     const std::vector<TrackingFrameRecord>& frames) = 0;
   /// All frames of a run by frame index.

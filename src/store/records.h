@@ -246,24 +246,51 @@ struct TrackingRunRecord {
   double tolerance_translation_mm = 3.0;    ///< > 0
   double tolerance_rotation_deg = 2.0;      ///< > 0
   std::int64_t started_unix_ms = 0;
+  /// The tracking/<name> folder name of the sequence; empty: not recorded
+  /// (runs from before schema version 5).
+  std::string sequence_name;
+  /// Person-readable summary written when the run is stored (frames,
+  /// tracked/carried/lost, in/out, timing); empty: not recorded.
+  std::string summary;
 };
 
 enum class TrackingFrameStatus { kInTolerance, kOutOfTolerance, kLost };
 
-/// The 6-DoF couch correction shown to the operator, about the room axes.
+/// The 6-DoF couch correction shown to the operator, in the couch axes of
+/// DATASET.md "Corrections" (IEC 61217, the planned model's axes):
+/// translation_mm = (lateral, longitudinal, vertical) isocentre shift in mm,
+/// rotation_deg = (pitch, roll, yaw), the rotation vector's components about
+/// those axes in degrees.
 struct Correction6Dof {
   Eigen::Vector3d translation_mm = Eigen::Vector3d::Zero();
   Eigen::Vector3d rotation_deg = Eigen::Vector3d::Zero();
 };
 
-/// One processed frame. kLost <=> no estimate: room_from_model and correction
-/// are empty exactly when status is kLost.
+/// One processed frame. kLost <=> no estimate: room_from_model, correction
+/// and the uncertainty are empty exactly when status is kLost, and source is
+/// "lost" exactly then (Database::AppendTrackingFrames refuses anything else).
+/// Frames stored before schema version 5 read back with source "lost" or
+/// "tracked" by their status, no room_from_camera, no uncertainty (even when
+/// not lost), total_ms 0 and an empty note.
 struct TrackingFrameRecord {
   std::int64_t frame_index = 0;  ///< >= 0, unique within a run
   double timestamp_s = 0;        ///< sequence timestamp
   TrackingFrameStatus status = TrackingFrameStatus::kLost;
   std::optional<Rigid3d> room_from_model;  ///< estimated model pose in the room
   std::optional<Correction6Dof> correction;
+  /// Camera -> room, the camera's localisation in the room map. May be set on
+  /// a lost frame (camera localised, patient not found); empty when the
+  /// camera was not localised.
+  std::optional<Rigid3d> room_from_camera;
+  /// How the patient pose was obtained: "tracked" (measured in this frame),
+  /// "carried" (carried over from earlier frames) or "lost" (none).
+  std::string source = "lost";
+  /// The bound on the pose error the in/out verdict was made with; both set,
+  /// >= 0, exactly when not lost.
+  std::optional<double> uncertainty_translation_mm;
+  std::optional<double> uncertainty_rotation_deg;
+  double total_ms = 0;  ///< processing time of the frame, >= 0
+  std::string note;     ///< why lost or carried, free text; may be empty
 };
 
 // ---------------------------------------------------------------- audit

@@ -783,8 +783,8 @@ std::vector<AlignmentRecord> SqliteDatabase::ListAlignments(ReconstructionId rec
 TrackingRunId SqliteDatabase::AddTrackingRun(const TrackingRunRecord& run) {
   SqliteStatementGuard s(
       Prepared("INSERT INTO tracking_runs (session_id, alignment_id, recording_id, options, "
-               "tolerance_translation_mm, tolerance_rotation_deg, started_unix_ms) "
-               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+               "tolerance_translation_mm, tolerance_rotation_deg, started_unix_ms, sequence_name, "
+               "summary) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)"));
   s->BindId(1, run.session_id);
   s->BindOptionalId(2, run.alignment_id);
   s->BindOptionalId(3, run.recording_id);
@@ -792,6 +792,8 @@ TrackingRunId SqliteDatabase::AddTrackingRun(const TrackingRunRecord& run) {
   s->BindDouble(5, run.tolerance_translation_mm);
   s->BindDouble(6, run.tolerance_rotation_deg);
   s->BindInt64(7, OrNow(run.started_unix_ms));
+  s->BindText(8, run.sequence_name);
+  s->BindText(9, run.summary);
   s->Execute();
   return TrackingRunId(LastInsertRowId());
 }
@@ -799,7 +801,8 @@ TrackingRunId SqliteDatabase::AddTrackingRun(const TrackingRunRecord& run) {
 std::optional<TrackingRunRecord> SqliteDatabase::GetTrackingRun(TrackingRunId id) {
   SqliteStatementGuard s(Prepared(
       "SELECT session_id, alignment_id, recording_id, options, tolerance_translation_mm, "
-      "tolerance_rotation_deg, started_unix_ms FROM tracking_runs WHERE tracking_run_id = ?1"));
+      "tolerance_rotation_deg, started_unix_ms, sequence_name, summary FROM tracking_runs "
+      "WHERE tracking_run_id = ?1"));
   s->BindId(1, id);
   if (!s->Step()) return std::nullopt;
   TrackingRunRecord run;
@@ -811,6 +814,8 @@ std::optional<TrackingRunRecord> SqliteDatabase::GetTrackingRun(TrackingRunId id
   run.tolerance_translation_mm = s->ColumnDouble(4);
   run.tolerance_rotation_deg = s->ColumnDouble(5);
   run.started_unix_ms = s->ColumnInt64(6);
+  run.sequence_name = s->ColumnText(7);
+  run.summary = s->ColumnText(8);
   return run;
 }
 
@@ -822,14 +827,33 @@ void SqliteDatabase::AppendTrackingFrames(TrackingRunId run,
                 "tracking frame " << frame.frame_index << " has status " << ToString(frame.status)
                                   << ": a frame has a pose and a correction exactly when it is "
                                      "not lost");
+    const bool known_source =
+        frame.source == "tracked" || frame.source == "carried" || frame.source == "lost";
+    ARPOS_CHECK(known_source && lost == (frame.source == "lost"),
+                "tracking frame " << frame.frame_index << " has status " << ToString(frame.status)
+                                  << " and source '" << frame.source
+                                  << "': the source is 'tracked', 'carried' or 'lost', and 'lost' "
+                                     "exactly when the status is lost");
+    const bool has_uncertainty = frame.uncertainty_translation_mm.has_value();
+    ARPOS_CHECK(has_uncertainty == frame.uncertainty_rotation_deg.has_value() && lost != has_uncertainty &&
+                    (!has_uncertainty ||
+                     (*frame.uncertainty_translation_mm >= 0 && *frame.uncertainty_rotation_deg >= 0)),
+                "tracking frame " << frame.frame_index << " has status " << ToString(frame.status)
+                                  << ": a frame has an uncertainty (translation and rotation, "
+                                     ">= 0) exactly when it is not lost");
+    // NaN would be stored as NULL: say what is wrong instead of "NOT NULL failed".
+    ARPOS_CHECK(frame.total_ms >= 0, "tracking frame " << frame.frame_index << " has total_ms "
+                                                       << frame.total_ms << "; it must be >= 0");
   }
   SqliteTransaction transaction(db_);
   for (const TrackingFrameRecord& frame : frames) {
     SqliteStatementGuard s(
         Prepared("INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status, "
                  "room_from_model, correction_tx_mm, correction_ty_mm, correction_tz_mm, "
-                 "correction_rx_deg, correction_ry_deg, correction_rz_deg) "
-                 "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)"));
+                 "correction_rx_deg, correction_ry_deg, correction_rz_deg, room_from_camera, "
+                 "source, uncertainty_translation_mm, uncertainty_rotation_deg, total_ms, note) "
+                 "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, "
+                 "?17)"));
     s->BindId(1, run);
     s->BindInt64(2, frame.frame_index);
     s->BindDouble(3, frame.timestamp_s);
@@ -848,6 +872,16 @@ void SqliteDatabase::AppendTrackingFrames(TrackingRunId run,
         s->BindNull(9 + i);
       }
     }
+    if (frame.room_from_camera) {
+      s->BindBlob(12, EncodePose(*frame.room_from_camera));
+    } else {
+      s->BindNull(12);
+    }
+    s->BindText(13, frame.source);
+    BindOptionalDouble(*s, 14, frame.uncertainty_translation_mm);
+    BindOptionalDouble(*s, 15, frame.uncertainty_rotation_deg);
+    s->BindDouble(16, frame.total_ms);
+    s->BindText(17, frame.note);
     s->Execute();
   }
   transaction.Commit();
@@ -857,7 +891,9 @@ std::vector<TrackingFrameRecord> SqliteDatabase::GetTrackingFrames(TrackingRunId
   SqliteStatementGuard s(Prepared(
       "SELECT frame_index, timestamp_s, status, room_from_model, correction_tx_mm, "
       "correction_ty_mm, correction_tz_mm, correction_rx_deg, correction_ry_deg, "
-      "correction_rz_deg FROM tracking_frames WHERE tracking_run_id = ?1 ORDER BY frame_index"));
+      "correction_rz_deg, room_from_camera, source, uncertainty_translation_mm, "
+      "uncertainty_rotation_deg, total_ms, note FROM tracking_frames WHERE tracking_run_id = ?1 "
+      "ORDER BY frame_index"));
   s->BindId(1, run);
   std::vector<TrackingFrameRecord> frames;
   while (s->Step()) {
@@ -879,6 +915,17 @@ std::vector<TrackingFrameRecord> SqliteDatabase::GetTrackingFrames(TrackingRunId
       }
       frame.correction = correction;
     }
+    if (!s->ColumnIsNull(10)) {
+      frame.room_from_camera =
+          DecodePose(s->ColumnBlob(10), "tracking_frames.room_from_camera of frame " +
+                                            std::to_string(frame.frame_index) + " in tracking run " +
+                                            std::to_string(run.value()));
+    }
+    frame.source = s->ColumnText(11);
+    frame.uncertainty_translation_mm = OptionalDouble(*s, 12);
+    frame.uncertainty_rotation_deg = OptionalDouble(*s, 13);
+    frame.total_ms = s->ColumnDouble(14);
+    frame.note = s->ColumnText(15);
     frames.push_back(std::move(frame));
   }
   return frames;

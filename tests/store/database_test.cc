@@ -275,17 +275,53 @@ TEST(SqliteDatabase, SchemaChecksRefuseBadRows) {
   // Lost frames carry no pose, and only lost frames lack one.
   EXPECT_EQ(RawExec(*db,
                     "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, "
-                    "status, room_from_model) VALUES (1, 100, 0, 'lost', x'00')"),
+                    "status, room_from_model, source) VALUES (1, 100, 0, 'lost', x'00', 'lost')"),
             SQLITE_CONSTRAINT_CHECK);
   EXPECT_EQ(RawExec(*db,
                     "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, "
-                    "status) VALUES (1, 100, 0, 'in_tolerance')"),
+                    "status, source) VALUES (1, 100, 0, 'in_tolerance', 'tracked')"),
             SQLITE_CONSTRAINT_CHECK);
   EXPECT_EQ(RawExec(*db,
                     "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, "
-                    "status) VALUES (1, 100, 0, 'drifting')"),
+                    "status, source) VALUES (1, 100, 0, 'drifting', 'tracked')"),
             SQLITE_CONSTRAINT_CHECK);
-  EXPECT_EQ(RawCount(*db, "tracking_frames"), 10);
+  // Schema version 5: the source is one of three and 'lost' exactly when the
+  // status is; the uncertainty comes in pairs, >= 0, never on a lost frame;
+  // the time is >= 0; every frame says its source.
+  const std::string lost_frame =
+      "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status, ";
+  for (const std::string& columns_values :
+       {std::string("source) VALUES (1, 100, 0, 'lost', 'tracked')"),
+        std::string("source) VALUES (1, 100, 0, 'lost', 'guessed')"),
+        std::string("source, uncertainty_translation_mm, uncertainty_rotation_deg) "
+                    "VALUES (1, 100, 0, 'lost', 'lost', 1, 1)"),
+        std::string("source, total_ms) VALUES (1, 100, 0, 'lost', 'lost', -1)")}) {
+    EXPECT_EQ(RawExec(*db, lost_frame + columns_values, &message), SQLITE_CONSTRAINT_CHECK)
+        << columns_values << ": " << message;
+  }
+  EXPECT_EQ(RawExec(*db, lost_frame + "room_from_model) VALUES (1, 100, 0, 'lost', NULL)"),
+            SQLITE_CONSTRAINT_NOTNULL);
+  const std::string posed_frame =
+      "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status, room_from_model, "
+      "correction_tx_mm, correction_ty_mm, correction_tz_mm, correction_rx_deg, correction_ry_deg, "
+      "correction_rz_deg, ";
+  for (const std::string& columns_values :
+       {std::string("source) VALUES (1, 100, 0, 'in_tolerance', x'00', 0, 0, 0, 0, 0, 0, 'lost')"),
+        std::string("source, uncertainty_translation_mm) "
+                    "VALUES (1, 100, 0, 'in_tolerance', x'00', 0, 0, 0, 0, 0, 0, 'tracked', 1)"),
+        std::string("source, uncertainty_translation_mm, uncertainty_rotation_deg) "
+                    "VALUES (1, 100, 0, 'in_tolerance', x'00', 0, 0, 0, 0, 0, 0, 'tracked', 1, -0.1)")}) {
+    EXPECT_EQ(RawExec(*db, posed_frame + columns_values, &message), SQLITE_CONSTRAINT_CHECK)
+        << columns_values << ": " << message;
+  }
+  // ...and the same row with a consistent source is taken.
+  EXPECT_EQ(RawExec(*db,
+                    posed_frame + "source, uncertainty_translation_mm, uncertainty_rotation_deg) VALUES "
+                                  "(1, 100, 0, 'in_tolerance', x'00', 0, 0, 0, 0, 0, 0, 'carried', 1, 0.1)",
+                    &message),
+            SQLITE_OK)
+      << message;
+  EXPECT_EQ(RawCount(*db, "tracking_frames"), 11);
 
   TrackingRunRecord run = s.tracking_run;
   run.tolerance_rotation_deg = 0;
@@ -335,6 +371,207 @@ TEST(SqliteDatabase, RoomMapCameraColumnsAreOptional) {
   negative.room_frame_yaw_sigma_deg = -0.01;
   ExpectStoreError([&] { db->AddRoomMap(negative); }, SQLITE_CONSTRAINT_CHECK, "room_frame_yaw_sigma_deg");
   EXPECT_EQ(RawCount(*db, "room_maps"), 3);
+}
+
+// What tracking produces per frame and per run (schema version 5), every
+// field given and every optional one left out.
+TEST(SqliteDatabase, TrackingFrameDetailRoundTrips) {
+  auto db = SqliteDatabase::Open(":memory:");
+  const test::FullStore s = test::WriteFullStore(*db, 11);
+  std::mt19937 rng(5);
+
+  TrackingRunRecord run = s.tracking_run;
+  run.sequence_name = "couch_shift";
+  run.summary = "3 frames: 1 tracked, 1 carried, 1 lost; 1 in, 1 out; 12.0 ms/frame (max 20.5)";
+  const TrackingRunId run_id = db->AddTrackingRun(run);
+  const auto run_back = db->GetTrackingRun(run_id);
+  ASSERT_TRUE(run_back);
+  EXPECT_EQ(run_back->sequence_name, "couch_shift");
+  EXPECT_EQ(run_back->summary, run.summary);
+  TrackingRunRecord bare_run = s.tracking_run;
+  bare_run.sequence_name.clear();
+  bare_run.summary.clear();
+  const auto bare_run_back = db->GetTrackingRun(db->AddTrackingRun(bare_run));
+  ASSERT_TRUE(bare_run_back);
+  EXPECT_EQ(bare_run_back->sequence_name, "");
+  EXPECT_EQ(bare_run_back->summary, "");
+
+  std::vector<TrackingFrameRecord> frames(3);
+  Correction6Dof correction;
+  correction.translation_mm = Eigen::Vector3d(1.5, -2.0, 0.25);  // lateral, longitudinal, vertical
+  correction.rotation_deg = Eigen::Vector3d(0.1, -0.3, 0.7);     // pitch, roll, yaw
+  frames[0].frame_index = 0;
+  frames[0].timestamp_s = 10.0;
+  frames[0].status = TrackingFrameStatus::kInTolerance;
+  frames[0].room_from_model = test::RandomPose(rng);
+  frames[0].correction = correction;
+  frames[0].room_from_camera = test::RandomPose(rng);
+  frames[0].source = "tracked";
+  frames[0].uncertainty_translation_mm = 0.75;
+  frames[0].uncertainty_rotation_deg = 0.125;
+  frames[0].total_ms = 20.5;
+  frames[1] = frames[0];
+  frames[1].frame_index = 1;
+  frames[1].status = TrackingFrameStatus::kOutOfTolerance;
+  frames[1].room_from_camera.reset();  // the store does not tie the camera pose to the status
+  frames[1].source = "carried";
+  frames[1].uncertainty_translation_mm = 3.5;
+  frames[1].uncertainty_rotation_deg = 0.0;
+  frames[1].total_ms = 0.0;
+  frames[1].note = "depth registration rejected (fitness 0.2)";
+  frames[2].frame_index = 2;
+  frames[2].timestamp_s = 10.066;
+  frames[2].status = TrackingFrameStatus::kLost;
+  frames[2].source = "lost";
+  frames[2].total_ms = 15.5;
+  frames[2].note = "camera not localised: 2 room markers";
+  db->AppendTrackingFrames(run_id, frames);
+
+  const auto back = db->GetTrackingFrames(run_id);
+  ASSERT_EQ(back.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const TrackingFrameRecord& e = frames[i];
+    const TrackingFrameRecord& a = back[i];
+    SCOPED_TRACE("frame " + std::to_string(i));
+    EXPECT_EQ(a.status, e.status);
+    ASSERT_EQ(a.room_from_camera.has_value(), e.room_from_camera.has_value());
+    if (e.room_from_camera) test::ExpectPoseEq(*e.room_from_camera, *a.room_from_camera);
+    EXPECT_EQ(a.source, e.source);
+    EXPECT_EQ(a.uncertainty_translation_mm, e.uncertainty_translation_mm);
+    EXPECT_EQ(a.uncertainty_rotation_deg, e.uncertainty_rotation_deg);
+    EXPECT_EQ(a.total_ms, e.total_ms);
+    EXPECT_EQ(a.note, e.note);
+    ASSERT_EQ(a.correction.has_value(), e.correction.has_value());
+    if (e.correction) {
+      EXPECT_EQ(a.correction->translation_mm, e.correction->translation_mm);
+      EXPECT_EQ(a.correction->rotation_deg, e.correction->rotation_deg);
+    }
+  }
+  // Absent is NULL in the file, not a zero pose or a zero bound.
+  sqlite3_stmt* stmt = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db->RawHandle(),
+                               "SELECT frame_index, room_from_camera IS NULL, uncertainty_translation_mm IS NULL, "
+                               "uncertainty_rotation_deg IS NULL FROM tracking_frames WHERE tracking_run_id = ?1 "
+                               "ORDER BY frame_index",
+                               -1, &stmt, nullptr),
+            SQLITE_OK);
+  sqlite3_bind_int64(stmt, 1, run_id.value());
+  std::string nulls;
+  while (sqlite3_step(stmt) == SQLITE_ROW) {
+    for (int c = 0; c < 4; ++c) nulls += std::to_string(sqlite3_column_int(stmt, c));
+    nulls += ' ';
+  }
+  sqlite3_finalize(stmt);
+  EXPECT_EQ(nulls, "0000 1100 2111 ");
+}
+
+// A frame can be lost with the camera localised (the patient was not found):
+// the camera pose is kept, the patient pose, correction and bound are not.
+TEST(SqliteDatabase, ALostFrameKeepsItsCameraPose) {
+  auto db = SqliteDatabase::Open(":memory:");
+  const test::FullStore s = test::WriteFullStore(*db, 12);
+  std::mt19937 rng(6);
+  TrackingFrameRecord frame;
+  frame.frame_index = 20;
+  frame.timestamp_s = 3.25;
+  frame.status = TrackingFrameStatus::kLost;
+  frame.source = "lost";
+  frame.room_from_camera = test::RandomPose(rng);
+  frame.total_ms = 9.75;
+  frame.note = "patient not found: no body marker in view";
+  db->AppendTrackingFrames(s.tracking_run.id, {frame});
+  const auto frames = db->GetTrackingFrames(s.tracking_run.id);
+  ASSERT_EQ(frames.size(), 11u);
+  const TrackingFrameRecord& back = frames.back();
+  EXPECT_EQ(back.frame_index, 20);
+  EXPECT_EQ(back.status, TrackingFrameStatus::kLost);
+  EXPECT_EQ(back.source, "lost");
+  ASSERT_TRUE(back.room_from_camera);
+  test::ExpectPoseEq(*frame.room_from_camera, *back.room_from_camera);
+  EXPECT_FALSE(back.room_from_model);
+  EXPECT_FALSE(back.correction);
+  EXPECT_FALSE(back.uncertainty_translation_mm);
+  EXPECT_FALSE(back.uncertainty_rotation_deg);
+  EXPECT_EQ(back.total_ms, 9.75);
+  EXPECT_EQ(back.note, frame.note);
+}
+
+// Expects AppendTrackingFrames to refuse `frame` with a message naming the
+// frame and containing `part`, writing nothing.
+void ExpectFrameRefused(SqliteDatabase& db, TrackingRunId run, const TrackingFrameRecord& frame,
+                        const std::string& part) {
+  const std::size_t before = db.GetTrackingFrames(run).size();
+  try {
+    db.AppendTrackingFrames(run, {frame});
+    ADD_FAILURE() << "frame with source '" << frame.source << "' and status " << ToString(frame.status)
+                  << " was taken";
+  } catch (const StoreError& e) {
+    ADD_FAILURE() << "refused by SQLite, not by the check before writing: " << e.what();
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("tracking frame " + std::to_string(frame.frame_index)), std::string::npos) << what;
+    EXPECT_NE(what.find(part), std::string::npos) << "'" << part << "' not in: " << what;
+  }
+  EXPECT_EQ(db.GetTrackingFrames(run).size(), before);
+}
+
+TEST(SqliteDatabase, AFrameWhoseSourceContradictsItsStatusIsRefused) {
+  auto db = SqliteDatabase::Open(":memory:");
+  const test::FullStore s = test::WriteFullStore(*db, 13);
+  TrackingFrameRecord posed = s.frames[0];  // tracked, in the FullStore
+  ASSERT_EQ(posed.source, "tracked");
+  posed.frame_index = 30;
+  TrackingFrameRecord lost = s.frames[4];  // lost
+  ASSERT_EQ(lost.status, TrackingFrameStatus::kLost);
+  lost.frame_index = 31;
+
+  TrackingFrameRecord frame = posed;
+  frame.source = "lost";  // a pose and a verdict, yet "lost"
+  ExpectFrameRefused(*db, s.tracking_run.id, frame, "source 'lost'");
+  for (const char* source : {"tracked", "carried"}) {  // lost, yet with a source
+    frame = lost;
+    frame.source = source;
+    ExpectFrameRefused(*db, s.tracking_run.id, frame, "source '" + std::string(source) + "'");
+  }
+  for (const char* source : {"", "Tracked", "interpolated"}) {  // not a source at all
+    frame = posed;
+    frame.source = source;
+    ExpectFrameRefused(*db, s.tracking_run.id, frame, "source '" + std::string(source) + "'");
+  }
+  // A bad frame in a batch stops the whole batch.
+  frame = posed;
+  frame.source = "lost";
+  TrackingFrameRecord good = posed;
+  good.frame_index = 32;
+  EXPECT_THROW(db->AppendTrackingFrames(s.tracking_run.id, {good, frame}), Error);
+  EXPECT_EQ(db->GetTrackingFrames(s.tracking_run.id).size(), 10u);
+
+  // The uncertainty is there exactly when not lost, both parts, >= 0; the
+  // time is >= 0.
+  frame = posed;
+  frame.uncertainty_rotation_deg.reset();
+  ExpectFrameRefused(*db, s.tracking_run.id, frame, "has an uncertainty");
+  frame = posed;
+  frame.uncertainty_translation_mm.reset();
+  frame.uncertainty_rotation_deg.reset();
+  ExpectFrameRefused(*db, s.tracking_run.id, frame, "has an uncertainty");
+  frame = posed;
+  frame.uncertainty_translation_mm = -0.5;
+  ExpectFrameRefused(*db, s.tracking_run.id, frame, "has an uncertainty");
+  frame = lost;
+  frame.uncertainty_translation_mm = 1.0;
+  frame.uncertainty_rotation_deg = 1.0;
+  ExpectFrameRefused(*db, s.tracking_run.id, frame, "has an uncertainty");
+  frame = posed;
+  frame.total_ms = -1;
+  ExpectFrameRefused(*db, s.tracking_run.id, frame, "has total_ms -1");
+
+  // The same frames with a consistent source are taken.
+  good = posed;
+  good.source = "carried";
+  frame = lost;
+  db->AppendTrackingFrames(s.tracking_run.id, {good, frame});
+  EXPECT_EQ(db->GetTrackingFrames(s.tracking_run.id).size(), 12u);
 }
 
 TEST(SqliteDatabase, ChildRowsAreWrittenAllOrNothing) {

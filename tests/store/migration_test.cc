@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <map>
 
@@ -147,16 +148,19 @@ void WriteOldData(RawDb& raw, const OldData& d, int version) {
   raw.Exec(
       "INSERT INTO tracking_runs (tracking_run_id, session_id, alignment_id, recording_id, "
       "options, started_unix_ms) VALUES (1, 1, 1, NULL, 'old options', 1600000105000)");
+  // From version 5 on a frame must say where its pose came from.
+  const bool with_source = version >= 5;
   raw.Exec(
       "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status, "
       "room_from_model, correction_tx_mm, correction_ty_mm, correction_tz_mm, "
-      "correction_rx_deg, correction_ry_deg, correction_rz_deg) VALUES (1, 0, 0.0, "
-      "'out_of_tolerance', ?1, "
-      "1, 2, 3, 0.1, 0.2, 0.3)",
+      "correction_rx_deg, correction_ry_deg, correction_rz_deg" +
+          std::string(with_source ? ", source" : "") +
+          ") VALUES (1, 0, 0.0, 'out_of_tolerance', ?1, 1, 2, 3, 0.1, 0.2, 0.3" +
+          (with_source ? ", 'tracked'" : "") + ")",
       {EncodePose(d.room_from_model)});
-  raw.Exec(
-      "INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status) "
-      "VALUES (1, 1, 0.033, 'lost')");
+  raw.Exec("INSERT INTO tracking_frames (tracking_run_id, frame_index, timestamp_s, status" +
+           std::string(with_source ? ", source" : "") + ") VALUES (1, 1, 0.033, 'lost'" +
+           (with_source ? ", 'lost'" : "") + ")");
   raw.Exec(
       "INSERT INTO audit_log (time_unix_ms, actor, action, entity, details) VALUES "
       "(1600000200000, 'old-arpos', 'approve_alignment', 'alignment:1', 'v" +
@@ -238,8 +242,24 @@ void ExpectOldDataIntact(Database& db, const OldData& d, int version) {
   ASSERT_EQ(frames.size(), 2u);
   ASSERT_TRUE(frames[0].room_from_model);
   test::ExpectPoseEq(d.room_from_model, *frames[0].room_from_model);
+  ASSERT_TRUE(frames[0].correction);
   EXPECT_EQ(frames[0].correction->translation_mm, Eigen::Vector3d(1, 2, 3));
+  EXPECT_EQ(frames[0].correction->rotation_deg, Eigen::Vector3d(0.1, 0.2, 0.3));
   EXPECT_EQ(frames[1].status, TrackingFrameStatus::kLost);
+  // 0005: runs and frames from before know nothing of the sequence, the
+  // summary, the camera pose, the uncertainty, the timing or a note; the
+  // source follows from the status.
+  EXPECT_EQ(run->sequence_name, "");
+  EXPECT_EQ(run->summary, "");
+  EXPECT_EQ(frames[0].source, "tracked");
+  EXPECT_EQ(frames[1].source, "lost");
+  for (const TrackingFrameRecord& frame : frames) {
+    EXPECT_FALSE(frame.room_from_camera) << "frame " << frame.frame_index;
+    EXPECT_FALSE(frame.uncertainty_translation_mm) << "frame " << frame.frame_index;
+    EXPECT_FALSE(frame.uncertainty_rotation_deg) << "frame " << frame.frame_index;
+    EXPECT_EQ(frame.total_ms, 0.0) << "frame " << frame.frame_index;
+    EXPECT_EQ(frame.note, "") << "frame " << frame.frame_index;
+  }
 
   const auto audit = db.ListAudit();
   ASSERT_EQ(audit.size(), 1u);
@@ -343,7 +363,7 @@ TEST(Migrations, AVersion3StoreGainsTheRoomMapCameraColumnsInPlace) {
   }
   {
     auto db = SqliteDatabase::Open(path);
-    EXPECT_EQ(db->Info().schema_version, 4);
+    EXPECT_EQ(db->Info().schema_version, LatestSchemaVersion());
     ExpectOldDataIntact(*db, data, 3);
     RoomMapRecord with_camera = *db->GetRoomMap(RoomMapId(1));
     with_camera.camera_response = "srgb: 0 1 2";
@@ -360,13 +380,98 @@ TEST(Migrations, AVersion3StoreGainsTheRoomMapCameraColumnsInPlace) {
     EXPECT_EQ(back->room_frame_couch_sigma_mm, 0.3);
   }
   RawDb raw(path);
-  EXPECT_EQ(ReadSchemaVersion(raw.get()), 4);
+  EXPECT_EQ(ReadSchemaVersion(raw.get()), LatestSchemaVersion());
   // The old row keeps every old column as it was; its new columns are NULL.
   EXPECT_EQ(raw.Text(old_columns), old_row);
   EXPECT_EQ(raw.Text("SELECT camera_response, depth_correction, room_frame_tilt_sigma_deg, "
                      "room_frame_yaw_sigma_deg, room_frame_couch_sigma_mm FROM room_maps WHERE room_map_id = 1"),
             "NULL|NULL|NULL|NULL|NULL|\n");
   EXPECT_EQ(raw.Text("SELECT COUNT(*) FROM room_maps"), "2|\n");
+}
+
+// A store written by the program of schema version 4 (tracking runs and
+// frames without the per-frame detail) migrates in place: tracking_frames is
+// rebuilt with its rows and their old columns unchanged, the new columns read
+// back as the documented defaults, and the old run takes new detailed frames.
+TEST(Migrations, AVersion4StoreGainsTheTrackingFrameDetailInPlace) {
+  TempDir dir;
+  const std::string path = (dir.path() / "v4.db").string();
+  const OldData data = MakeOldData();
+  const std::string old_frame_columns =
+      "SELECT tracking_run_id, frame_index, timestamp_s, status, hex(room_from_model), correction_tx_mm, "
+      "correction_ty_mm, correction_tz_mm, correction_rx_deg, correction_ry_deg, correction_rz_deg "
+      "FROM tracking_frames ORDER BY tracking_run_id, frame_index";
+  const std::string old_run_columns =
+      "SELECT tracking_run_id, session_id, alignment_id, recording_id, options, tolerance_translation_mm, "
+      "tolerance_rotation_deg, started_unix_ms FROM tracking_runs";
+  std::string old_frames, old_run;
+  {
+    RawDb raw(path);
+    ASSERT_EQ(MigrateSchema(raw.get(), path, 4), 4);
+    WriteOldData(raw, data, 4);
+    EXPECT_EQ(raw.Text("SELECT name FROM pragma_table_info('tracking_frames') WHERE name = 'source'"), "");
+    old_frames = raw.Text(old_frame_columns);
+    old_run = raw.Text(old_run_columns);
+    ASSERT_EQ(std::count(old_frames.begin(), old_frames.end(), '\n'), 2);
+  }
+  {
+    auto db = SqliteDatabase::Open(path);
+    EXPECT_EQ(db->Info().schema_version, LatestSchemaVersion());
+    ExpectOldDataIntact(*db, data, 4);
+
+    const auto run = db->GetTrackingRun(TrackingRunId(1));
+    ASSERT_TRUE(run);
+    EXPECT_EQ(run->sequence_name, "");
+    EXPECT_EQ(run->summary, "");
+    const auto frames = db->GetTrackingFrames(TrackingRunId(1));
+    ASSERT_EQ(frames.size(), 2u);
+    EXPECT_EQ(frames[0].status, TrackingFrameStatus::kOutOfTolerance);
+    EXPECT_EQ(frames[0].source, "tracked");
+    EXPECT_EQ(frames[1].status, TrackingFrameStatus::kLost);
+    EXPECT_EQ(frames[1].source, "lost");
+    for (const TrackingFrameRecord& frame : frames) {
+      EXPECT_FALSE(frame.room_from_camera);
+      EXPECT_FALSE(frame.uncertainty_translation_mm);
+      EXPECT_FALSE(frame.uncertainty_rotation_deg);
+      EXPECT_EQ(frame.total_ms, 0.0);
+      EXPECT_EQ(frame.note, "");
+    }
+
+    // The old run takes a frame with every new field.
+    TrackingFrameRecord frame = frames[0];
+    frame.frame_index = 2;
+    frame.source = "carried";
+    frame.room_from_camera = data.body_from_marker;
+    frame.uncertainty_translation_mm = 1.25;
+    frame.uncertainty_rotation_deg = 0.5;
+    frame.total_ms = 33.5;
+    frame.note = "carried over";
+    db->AppendTrackingFrames(TrackingRunId(1), {frame});
+    const auto back = db->GetTrackingFrames(TrackingRunId(1));
+    ASSERT_EQ(back.size(), 3u);
+    EXPECT_EQ(back[2].source, "carried");
+    ASSERT_TRUE(back[2].room_from_camera);
+    test::ExpectPoseEq(data.body_from_marker, *back[2].room_from_camera);
+    EXPECT_EQ(back[2].uncertainty_translation_mm, 1.25);
+    EXPECT_EQ(back[2].total_ms, 33.5);
+    EXPECT_EQ(back[2].note, "carried over");
+  }
+  RawDb raw(path);
+  EXPECT_EQ(ReadSchemaVersion(raw.get()), LatestSchemaVersion());
+  // The old rows keep every old column as they were; the rebuild left nothing behind.
+  EXPECT_EQ(raw.Text(old_run_columns), old_run);
+  EXPECT_EQ(raw.Text(old_frame_columns + " LIMIT 2"), old_frames);
+  EXPECT_EQ(raw.Text("SELECT sequence_name, summary FROM tracking_runs"), "||\n");
+  EXPECT_EQ(raw.Text("SELECT frame_index, room_from_camera, source, uncertainty_translation_mm, "
+                     "uncertainty_rotation_deg, total_ms, note FROM tracking_frames WHERE frame_index < 2 "
+                     "ORDER BY frame_index"),
+            "0|NULL|tracked|NULL|NULL|0.0||\n1|NULL|lost|NULL|NULL|0.0||\n");
+  EXPECT_EQ(raw.Text("SELECT name FROM sqlite_master WHERE name LIKE 'tracking_frames%'"),
+            "tracking_frames|\n");
+  // The rebuilt table keeps its foreign key: deleting the run takes the frames.
+  raw.Exec("PRAGMA foreign_keys = ON");
+  raw.Exec("DELETE FROM tracking_runs");
+  EXPECT_EQ(raw.Text("SELECT COUNT(*) FROM tracking_frames"), "0|\n");
 }
 
 TEST(Migrations, AFailingStepIsRolledBackWhole) {

@@ -179,14 +179,25 @@ FullStore WriteFullStore(Database& database, unsigned seed) {
   s.tracking_run.tolerance_translation_mm = 2.5;
   s.tracking_run.tolerance_rotation_deg = 1.5;
   s.tracking_run.started_unix_ms = 1700000106000;
+  s.tracking_run.sequence_name = "fraction_2_" + tag;
+  s.tracking_run.summary = "10 frames: 6 tracked, 2 carried, 2 lost; 4 in, 4 out; 21.5 ms/frame";
   s.tracking_run.id = database.AddTrackingRun(s.tracking_run);
 
+  // Frame 4 is lost with the camera not localised, frame 8 lost with the
+  // camera localised (patient not found), frames 2 and 3 carried. The camera
+  // poses come from a generator of their own so that the other records stay
+  // what they were before schema version 5.
+  std::mt19937 camera_rng(seed + 1000);
   for (int i = 0; i < 10; ++i) {
     TrackingFrameRecord frame;
     frame.frame_index = i;
     frame.timestamp_s = 1305031102.175304 + i / 30.0;
-    if (i == 4) {
+    frame.total_ms = 15.25 + i;
+    if (i == 4 || i == 8) {
       frame.status = TrackingFrameStatus::kLost;
+      frame.source = "lost";
+      if (i == 8) frame.room_from_camera = RandomPose(camera_rng);
+      frame.note = i == 4 ? "camera not localised" : "patient not found: no body marker seen";
     } else {
       frame.status =
           i < 6 ? TrackingFrameStatus::kOutOfTolerance : TrackingFrameStatus::kInTolerance;
@@ -195,6 +206,11 @@ FullStore WriteFullStore(Database& database, unsigned seed) {
       correction.translation_mm = Eigen::Vector3d(10.0 - i, -2.5, 0.5 * i);
       correction.rotation_deg = Eigen::Vector3d(0.1 * i, -0.2, 1.0);
       frame.correction = correction;
+      frame.room_from_camera = RandomPose(camera_rng);
+      frame.source = i == 2 || i == 3 ? "carried" : "tracked";
+      if (frame.source == "carried") frame.note = "depth registration rejected; stickers carried";
+      frame.uncertainty_translation_mm = 0.25 * i;  // 0 for frame 0: the bound may be 0
+      frame.uncertainty_rotation_deg = 0.05 + 0.01 * i;
     }
     s.frames.push_back(frame);
   }
@@ -369,6 +385,8 @@ void ExpectFullStoreEq(Database& database, const FullStore& s) {
   EXPECT_EQ(run->tolerance_translation_mm, s.tracking_run.tolerance_translation_mm);
   EXPECT_EQ(run->tolerance_rotation_deg, s.tracking_run.tolerance_rotation_deg);
   EXPECT_EQ(run->started_unix_ms, s.tracking_run.started_unix_ms);
+  EXPECT_EQ(run->sequence_name, s.tracking_run.sequence_name);
+  EXPECT_EQ(run->summary, s.tracking_run.summary);
 
   const std::vector<TrackingFrameRecord> frames = database.GetTrackingFrames(s.tracking_run.id);
   ASSERT_EQ(frames.size(), s.frames.size());
@@ -385,6 +403,13 @@ void ExpectFullStoreEq(Database& database, const FullStore& s) {
       EXPECT_EQ(a.correction->translation_mm, e.correction->translation_mm);
       EXPECT_EQ(a.correction->rotation_deg, e.correction->rotation_deg);
     }
+    ASSERT_EQ(a.room_from_camera.has_value(), e.room_from_camera.has_value()) << "frame " << i;
+    if (e.room_from_camera) ExpectPoseEq(*e.room_from_camera, *a.room_from_camera);
+    EXPECT_EQ(a.source, e.source) << "frame " << i;
+    EXPECT_EQ(a.uncertainty_translation_mm, e.uncertainty_translation_mm) << "frame " << i;
+    EXPECT_EQ(a.uncertainty_rotation_deg, e.uncertainty_rotation_deg) << "frame " << i;
+    EXPECT_EQ(a.total_ms, e.total_ms) << "frame " << i;
+    EXPECT_EQ(a.note, e.note) << "frame " << i;
   }
 
   const std::vector<AuditEntry> audit = database.ListAudit();
