@@ -11,6 +11,7 @@
 #include "sensor/sequence.h"
 #include "store/database.h"
 #include "store/record_conversions.h"
+#include "tracking/tracking_stage.h"
 #include "util/logging.h"
 #include "util/string_util.h"
 
@@ -19,6 +20,7 @@ namespace arpos {
 std::string RunCaseOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
   if (actor.empty()) return "actor must not be empty";
+  if (const std::string t = tolerances.Validate(); !t.empty()) return "--tolerance-mm/--tolerance-deg: " + t;
   return "";
 }
 
@@ -29,6 +31,7 @@ std::string RunCaseResult::Summary() const {
       << " frames), reference model " << reference_model_vertices << " vertices\n";
   if (!plan_summary.empty()) out << plan_summary << "\n";
   if (!session_summary.empty()) out << session_summary;
+  if (!tracking_summary.empty()) out << tracking_summary;
   if (!evaluation.empty()) out << evaluation;
   for (const auto& f : failures) out << "FAILED: " << f << "\n";
   out << "stages done: ";
@@ -119,8 +122,9 @@ void RunCaseController::Run() {
   result_.stages_done.push_back("reconstruction");
   result_.stages_done.push_back("alignment");
 
-  Step("registering the tracking recordings", 0.9);
+  Step("registering the tracking recordings", 0.85);
   const CameraIntrinsics& camera = folder.config.camera;
+  std::vector<std::pair<std::string, RecordingId>> tracking_recordings;
   database_->WithTransaction([&] {
     for (const auto& [name, dir] : folder.tracking) {
       RecordingRecord rec;
@@ -132,9 +136,37 @@ void RunCaseController::Run() {
       rec.intrinsics = ToRecordingIntrinsics(camera);
       result_.frames += static_cast<int>(rec.frame_count);
       result_.recordings.push_back(database_->AddRecording(rec));
+      tracking_recordings.emplace_back(name, result_.recordings.back());
     }
   });
   result_.stages_done.push_back("tracking recordings registered");
+
+  // Tracking mode on every tracking/<name>, into <out>/<name>/.
+  std::vector<std::pair<std::string, TrackSequenceResult>> tracked;
+  if (!folder.tracking.empty()) {
+    const TrackingInputs inputs = LoadTrackingInputs(database_, result_.session_id, "");
+    size_t k = 0;
+    for (const auto& [name, dir] : folder.tracking) {
+      Step("tracking " + name, 0.87 + 0.12 * k / folder.tracking.size());
+      TrackSequenceOptions track;
+      track.sequence_dir = dir;
+      track.name = name;
+      if (options_.out_dir) track.out_dir = *options_.out_dir / name;
+      track.overlay = options_.out_dir.has_value() && options_.overlay;
+      track.tolerances = options_.tolerances;
+      track.actor = options_.actor;
+      track.recording_id = tracking_recordings[k].second;
+      try {
+        TrackSequenceResult r = TrackSequence(database_, inputs, folder.config, track);
+        result_.tracking_summary += r.Summary() + "\n";
+        tracked.emplace_back(name, std::move(r));
+      } catch (const InputError& e) {
+        result_.failures.push_back("tracking " + name + ": " + e.what());
+      }
+      ++k;
+    }
+    if (!tracked.empty()) result_.stages_done.push_back("tracking");
+  }
 
   // Ground truth, where the case has it.
   const Sequence scan = Sequence::Open(folder.body_scan_dir);
@@ -145,6 +177,24 @@ void RunCaseController::Run() {
     const TrajectoryEvaluation e = EvaluateTrajectory(*body_gt, estimate);
     evaluation << StringPrintf("model pose at scan time vs body_groundtruth.txt: %.3f mm, %.4f deg\n",
                                e.translation_mm.mean, e.rotation_deg.mean);
+  }
+  for (const auto& [name, r] : tracked) {
+    std::filesystem::path dir;
+    for (const auto& [n, d] : folder.tracking) {
+      if (n == name) dir = d;
+    }
+    const Sequence seq = Sequence::Open(dir);
+    const auto body_gt = seq.BodyGroundTruth();
+    if (!body_gt || body_gt->empty()) continue;
+    const TrajectoryEvaluation e = EvaluateTrajectory(*body_gt, r.poses);
+    if (e.has_errors()) {
+      evaluation << StringPrintf("tracking %s vs body_groundtruth.txt: MTE %.2f mm, MRE %.3f deg (median %.2f mm, "
+                                 "p95 %.2f mm), %.1f %% lost\n",
+                                 name.c_str(), e.translation_mm.mean, e.rotation_deg.mean, e.translation_mm.median,
+                                 e.translation_mm.p95, e.lost_percent);
+    } else {
+      evaluation << "tracking " << name << " vs body_groundtruth.txt: n/a (every frame lost)\n";
+    }
   }
   result_.evaluation = evaluation.str();
   Step("done", 1.0);

@@ -10,7 +10,7 @@
 /// alignment: SessionController); register the tracking recordings in that
 /// session. Where the case has ground truth, the body-scan camera poses and
 /// the model pose at scan time are evaluated against it (DATASET.md figures).
-/// Tracking joins here when it is built. Every write is logged in the audit
+/// Then tracking mode on every tracking/<name> (outputs in <out>/<name>/). Every write is logged in the audit
 /// log with `actor`.
 
 #include <filesystem>
@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "controllers/controller.h"
+#include "feedback/couch_correction.h"
 #include "store/records.h"
 
 namespace arpos {
@@ -30,7 +31,11 @@ struct RunCaseOptions {
   std::string patient_external_id;  ///< empty: the case folder's name
   std::string actor = "arpos run-case";
   bool read_all_images = true;      ///< false: check a sample of the images
-  std::optional<std::filesystem::path> out_dir;  ///< session outputs (model_pose.txt, ...)
+  /// Session outputs (model_pose.txt, ...) and, per tracking/<name>, the
+  /// tracking outputs in <out_dir>/<name>/ (DATASET.md).
+  std::optional<std::filesystem::path> out_dir;
+  bool overlay = true;  ///< with out_dir: the AR overlay of every tracked frame
+  CouchTolerances tolerances;
   int threads = 2;
 
   /// Empty if valid, else what is wrong.
@@ -49,6 +54,7 @@ struct RunCaseResult {
   RoomMapId room_map_id;
   std::string plan_summary;     ///< room map figures
   std::string session_summary;  ///< session stage figures
+  std::string tracking_summary;  ///< one block per tracked sequence
   /// Against ground truth, when the case has it (empty otherwise).
   std::string evaluation;
   /// Stages that could not be done, with the reason ("session: ..."). What

@@ -27,6 +27,9 @@
 #include "exe/cmd_localize.h"
 #include "exe/cmd_plan.h"
 #endif
+#ifdef ARPOS_HAVE_TRACKING
+#include "exe/cmd_track.h"
+#endif
 
 namespace {
 
@@ -53,6 +56,9 @@ const std::vector<Command>& Commands() {
       {"plan", "build the room map from a case's room/ sequence and store it", arpos::RunPlanCommand},
       {"localize", "camera pose of every frame of a sequence against the stored room map",
        arpos::RunLocalizeCommand},
+#endif
+#ifdef ARPOS_HAVE_TRACKING
+      {"track", "tracking mode: camera, patient and couch correction every frame", arpos::RunTrackCommand},
 #endif
 #ifdef ARPOS_HAVE_SIMULATE
       {"simulate", "write a synthetic case folder with exact ground truth", arpos::RunSimulateCommand},

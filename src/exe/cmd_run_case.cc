@@ -11,21 +11,34 @@ namespace arpos {
 
 int RunRunCaseCommand(const std::vector<std::string>& argv) {
   const char* usage =
-      "usage: arpos run-case CASE_DIR [--store DB] [--patient ID] [--quick]\n"
-      "Runs every stage that exists on a case folder (DATASET.md) and stores the\n"
-      "results in the session store: validates the case, imports the reference\n"
-      "model and target pose into a plan, registers the recordings and opens a\n"
-      "session (room map, body marker map, reconstruction, alignment). A stage that\n"
-      "cannot be done is reported (exit status 1); what earlier stages stored stays.\n"
-      "  --store DB     session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
-      "  --patient ID   patient id to file the plan under (default: the case folder name)\n"
-      "  --quick        check a sample of the images instead of all\n";
-  const Args args(argv, {"store", "patient"}, {"quick", "help"});
+      "usage: arpos run-case CASE_DIR [--store DB] [--out DIR] [options]\n"
+      "Runs every stage on a case folder (DATASET.md) and stores the results in the\n"
+      "session store: validates the case, imports the reference model and target pose\n"
+      "into a plan with the room map (planning), opens a session (body marker map,\n"
+      "reconstruction, alignment), then tracks every tracking/<name> sequence (camera,\n"
+      "patient and couch correction per frame). A stage that cannot be done is\n"
+      "reported (exit status 1); what earlier stages stored stays.\n"
+      "  --store DB          session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
+      "  --out DIR           write the session outputs (model_pose.txt, camera_pose.txt,\n"
+      "                      reconstruction_mesh.ply) and, per tracking sequence,\n"
+      "                      DIR/<name>/poses.txt, camera_poses.txt, corrections.csv,\n"
+      "                      timing.csv and overlay/<timestamp>.png\n"
+      "  --no-overlay        with --out: no overlay images\n"
+      "  --tolerance-mm MM   tracking: translation tolerance (default 2)\n"
+      "  --tolerance-deg DEG tracking: rotation tolerance (default 1)\n"
+      "  --patient ID        patient id to file the plan under (default: the case folder name)\n"
+      "  --quick             check a sample of the images instead of all\n";
+  const Args args(argv, {"store", "patient", "out", "tolerance-mm", "tolerance-deg"},
+                  {"quick", "no-overlay", "help"});
   if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   RunCaseOptions options;
   options.case_dir = args.positional()[0];
   options.patient_external_id = args.GetOr("patient", "");
   options.read_all_images = !args.Has("quick");
+  if (args.Has("out")) options.out_dir = std::filesystem::path(args.Require("out"));
+  options.overlay = !args.Has("no-overlay");
+  options.tolerances.translation_mm = args.GetDouble("tolerance-mm", 2.0);
+  options.tolerances.rotation_deg = args.GetDouble("tolerance-deg", 1.0);
   const std::string store_path = args.GetOr("store", DefaultStorePath());
   auto database = SqliteDatabase::Open(store_path);
   RunCaseController controller(options, database.get(),

@@ -209,6 +209,8 @@ void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>
             [](const MarkerObservation& a, const MarkerObservation& b) { return a.id < b.id; });
 }
 
+int MarkerDetector::marker_bits() const { return impl_->dictionary->markerSize; }
+
 std::vector<MarkerObservation> DetectMarkers(const cv::Mat& gray_or_bgr,
                                              const MarkerDetectorOptions& options) {
   MarkerDetector detector(options);

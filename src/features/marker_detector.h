@@ -102,6 +102,8 @@ class MarkerDetector {
   void Detect(const cv::Mat& gray_or_bgr, std::vector<MarkerObservation>* observations);
 
   const MarkerDetectorOptions& options() const { return options_; }
+  /// Data bits per marker side of the dictionary (4 for DICT_4X4_*).
+  int marker_bits() const;
 
  private:
   struct Impl;

@@ -8,7 +8,11 @@
 
 namespace arpos {
 
-Sequence Sequence::Open(const std::filesystem::path& folder) {
+Sequence Sequence::Open(const std::filesystem::path& folder) { return OpenImpl(folder, false); }
+
+Sequence Sequence::OpenEveryColourFrame(const std::filesystem::path& folder) { return OpenImpl(folder, true); }
+
+Sequence Sequence::OpenImpl(const std::filesystem::path& folder, bool every_colour_frame) {
   if (!std::filesystem::is_directory(folder)) {
     ARPOS_INPUT_ERROR(folder.string() << ": sequence folder does not exist");
   }
@@ -41,23 +45,58 @@ Sequence Sequence::Open(const std::filesystem::path& folder) {
                                       << kFrameAssociationS << " s (" << rgb.size()
                                       << " colour, " << depth.size() << " depth entries)");
   }
-  for (const auto& [i, j] : pairs) {
-    seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, depth[j].relative_path});
+  if (every_colour_frame) {
+    std::vector<std::string> partner(rgb.size());
+    for (const auto& [i, j] : pairs) partner[i] = depth[j].relative_path;
+    for (size_t i = 0; i < rgb.size(); ++i) seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, partner[i]});
+  } else {
+    for (const auto& [i, j] : pairs) {
+      seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, depth[j].relative_path});
+    }
   }
   seq.unmatched_color_ = rgb.size() - pairs.size();
   return seq;
 }
 
-RgbdFrame Sequence::LoadFrame(size_t i, const CameraIntrinsics& intrinsics) const {
+namespace {
+// The depth image of a frame, or empty with the reason.
+cv::Mat ReadDepth(const std::filesystem::path& depth_file, const CameraIntrinsics& intrinsics, std::string* problem) {
+  if (!std::filesystem::exists(depth_file)) {
+    *problem = depth_file.string() + ": missing depth image";
+    return cv::Mat();
+  }
+  cv::Mat depth = cv::imread(depth_file.string(), cv::IMREAD_UNCHANGED);
+  if (depth.empty()) {
+    *problem = depth_file.string() + ": unreadable or corrupt image";
+    return cv::Mat();
+  }
+  if (depth.type() != CV_16UC1) {
+    *problem = depth_file.string() + ": depth must be 16-bit single-channel, got " +
+               std::to_string(depth.channels()) + " channel(s) of " + (depth.depth() == CV_8U ? "8" : "non-16") +
+               "-bit";
+    return cv::Mat();
+  }
+  if (depth.cols != intrinsics.width || depth.rows != intrinsics.height) {
+    *problem = depth_file.string() + ": image is " + std::to_string(depth.cols) + "x" + std::to_string(depth.rows) +
+               " but case.yaml camera is " + std::to_string(intrinsics.width) + "x" +
+               std::to_string(intrinsics.height);
+    return cv::Mat();
+  }
+  return depth;
+}
+}  // namespace
+
+RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intrinsics,
+                                         std::string* depth_problem) const {
   ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
+  ARPOS_CHECK(depth_problem != nullptr, "depth_problem must not be null");
+  depth_problem->clear();
   RgbdFrame frame;
   frame.index = static_cast<int>(i);
   frame.timestamp_s = frames_[i].timestamp_s;
   frame.depth_scale = intrinsics.depth_scale;
   const auto color_file = color_path(i);
-  const auto depth_file = depth_path(i);
   if (!std::filesystem::exists(color_file)) ARPOS_INPUT_ERROR(color_file.string() << ": missing colour image");
-  if (!std::filesystem::exists(depth_file)) ARPOS_INPUT_ERROR(depth_file.string() << ": missing depth image");
   frame.color = cv::imread(color_file.string(), cv::IMREAD_UNCHANGED);
   if (frame.color.empty()) ARPOS_INPUT_ERROR(color_file.string() << ": unreadable or corrupt image");
   if (frame.color.depth() != CV_8U) {
@@ -72,21 +111,24 @@ RgbdFrame Sequence::LoadFrame(size_t i, const CameraIntrinsics& intrinsics) cons
     cv::cvtColor(frame.color, bgr, cv::COLOR_BGRA2BGR);
     frame.color = bgr;
   }
-  frame.depth = cv::imread(depth_file.string(), cv::IMREAD_UNCHANGED);
-  if (frame.depth.empty()) ARPOS_INPUT_ERROR(depth_file.string() << ": unreadable or corrupt image");
-  if (frame.depth.type() != CV_16UC1) {
-    ARPOS_INPUT_ERROR(depth_file.string() << ": depth must be 16-bit single-channel, got "
-                                          << frame.depth.channels() << " channel(s) of "
-                                          << (frame.depth.depth() == CV_8U ? "8" : "non-16")
-                                          << "-bit");
+  if (frame.color.cols != intrinsics.width || frame.color.rows != intrinsics.height) {
+    ARPOS_INPUT_ERROR(color_file.string() << ": image is " << frame.color.cols << "x" << frame.color.rows
+                                          << " but case.yaml camera is " << intrinsics.width << "x"
+                                          << intrinsics.height);
   }
-  for (const auto& [file, image] : {std::pair{color_file, frame.color}, std::pair{depth_file, frame.depth}}) {
-    if (image.cols != intrinsics.width || image.rows != intrinsics.height) {
-      ARPOS_INPUT_ERROR(file.string() << ": image is " << image.cols << "x" << image.rows
-                                      << " but case.yaml camera is " << intrinsics.width << "x"
-                                      << intrinsics.height);
-    }
+  if (frames_[i].depth.empty()) {
+    *depth_problem = "no depth image within " + StringPrintf("%.3f", kFrameAssociationS) + " s in depth.txt";
+  } else {
+    frame.depth = ReadDepth(depth_path(i), intrinsics, depth_problem);
   }
+  return frame;
+}
+
+RgbdFrame Sequence::LoadFrame(size_t i, const CameraIntrinsics& intrinsics) const {
+  ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
+  std::string depth_problem;
+  RgbdFrame frame = LoadFrameColourFirst(i, intrinsics, &depth_problem);
+  if (!depth_problem.empty()) ARPOS_INPUT_ERROR(depth_problem);
   return frame;
 }
 

@@ -1,0 +1,612 @@
+#include "tracking/body_tracker.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <limits>
+
+#include <Eigen/Dense>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "features/edge_refinement.h"
+#include "registration/mesh_cloud.h"
+#include "util/check.h"
+#include "util/logging.h"
+#include "util/string_util.h"
+
+namespace arpos {
+
+std::string BodyTrackerOptions::Validate() const {
+  if (!(marker_size_m > 0)) return "marker_size_m must be positive";
+  if (!(model_spacing_m > 0.0005 && model_spacing_m < 0.05)) return "model_spacing_m must be in (0.5 mm, 5 cm)";
+  if (zbuffer_cell_px < 1) return "zbuffer_cell_px must be at least 1";
+  if (!(zbuffer_tolerance_m > 0)) return "zbuffer_tolerance_m must be positive";
+  if (max_depth_points < 10) return "max_depth_points must be at least 10";
+  if (!(corner_sigma_px > 0)) return "corner_sigma_px must be positive";
+  if (!(depth_sigma_const_m >= 0) || !(depth_sigma_quad_per_m >= 0) ||
+      !(depth_sigma_const_m + depth_sigma_quad_per_m > 0)) {
+    return "depth sigmas must be non-negative and not both zero";
+  }
+  if (depth_max_effective < 1) return "depth_max_effective must be at least 1";
+  if (!(depth_gate_initial_m > 0) || !(depth_gate_final_m > 0)) return "depth gates must be positive";
+  if (!(huber_sigmas > 0)) return "huber_sigmas must be positive";
+  if (max_iterations < 1) return "max_iterations must be at least 1";
+  if (!(max_sticker_rms_px > 0)) return "max_sticker_rms_px must be positive";
+  if (!(sticker_window_margin_px >= 0)) return "sticker_window_margin_px must not be negative";
+  if (!(detection_side_px >= 8)) return "detection_side_px must be at least 8";
+  if (!(min_sticker_side_px >= 3)) return "min_sticker_side_px must be at least 3";
+  if (max_frames_without_stickers < 0) return "max_frames_without_stickers must not be negative";
+  if (!(min_depth_inlier_fraction >= 0 && min_depth_inlier_fraction <= 1)) {
+    return "min_depth_inlier_fraction must be in [0, 1]";
+  }
+  if (min_depth_inliers < 1) return "min_depth_inliers must be at least 1";
+  if (!(max_position_sigma_m > 0)) return "max_position_sigma_m must be positive";
+  std::string reason;
+  if (!detector.Check(&reason)) return "detector: " + reason;
+  if (!marker_pose.Check(&reason)) return "marker_pose: " + reason;
+  return "";
+}
+
+const char* BodyPoseSourceName(BodyPoseSource source) {
+  switch (source) {
+    case BodyPoseSource::kStickers: return "stickers";
+    case BodyPoseSource::kCarried: return "carried";
+    case BodyPoseSource::kLost: return "lost";
+  }
+  return "lost";
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& p) {
+  Eigen::Matrix3d s;
+  s << 0, -p.z(), p.y(), p.z(), 0, -p.x(), -p.y(), p.x(), 0;
+  return s;
+}
+
+// A sticker seen in this frame: corners in normalised ideal coordinates.
+struct SeenSticker {
+  int id = -1;
+  std::array<Eigen::Vector3d, 4> corners_in_model;
+  std::array<Eigen::Vector2d, 4> normalised;
+  std::array<double, 4> sigma_px{};
+  MarkerPose single_view;
+  Rigid3d marker_from_model;
+};
+
+}  // namespace
+
+struct BodyTracker::Impl {
+  CameraIntrinsics K;
+  bool distorted = false;
+  cv::Mat rays;  // CV_32FC2: normalised ideal coordinates of every pixel (distorted cameras)
+  std::vector<Eigen::Vector3d> model_points, model_normals;
+  std::map<int, Rigid3d> model_from_marker;
+  std::array<Eigen::Vector3d, 4> corners_in_marker;
+  std::unique_ptr<MarkerDetector> detector;  // whole image, edge-line corners
+  std::unique_ptr<MarkerDetector> coarse;    // small upsampled windows, contour corners
+  EdgeRefinementOptions edge;
+  PixelUndistorter undistorter;
+  EdgeRefinementWorkspace workspace;
+  std::vector<MarkerObservation> scratch;
+  cv::Mat gray, window_up;
+
+  struct Past {
+    double t;
+    Rigid3d pose;
+  };
+  std::deque<Past> past;
+  int frames_without_stickers = 0;
+
+  // Per-frame buffers.
+  std::vector<int> visible;
+  std::vector<float> zbuffer;
+
+  Eigen::Vector2d Distort(const Eigen::Vector2d& n) const {
+    if (!distorted) return n;
+    const auto& d = K.distortion;
+    const double x = n.x(), y = n.y(), r2 = x * x + y * y;
+    const double radial = 1 + d[0] * r2 + d[1] * r2 * r2 + d[4] * r2 * r2 * r2;
+    return {x * radial + 2 * d[2] * x * y + d[3] * (r2 + 2 * x * x),
+            y * radial + d[2] * (r2 + 2 * y * y) + 2 * d[3] * x * y};
+  }
+  Eigen::Vector2d PixelOf(const Eigen::Vector3d& p) const {
+    const Eigen::Vector2d n = Distort(Eigen::Vector2d(p.x() / p.z(), p.y() / p.z()));
+    return {K.fx * n.x() + K.cx, K.fy * n.y() + K.cy};
+  }
+  Eigen::Vector2d RayOf(int u, int v) const {
+    if (!distorted) return {(u - K.cx) / K.fx, (v - K.cy) / K.fy};
+    const cv::Vec2f r = rays.at<cv::Vec2f>(v, u);
+    return {r[0], r[1]};
+  }
+
+  // Each mapped sticker the pose puts in view, searched in a window around
+  // its predicted corners.
+  void SearchAround(const Rigid3d& camera_from_model, const BodyTrackerOptions& o,
+                    std::vector<MarkerObservation>* found) {
+    found->clear();
+    for (const auto& [id, model_from_sticker] : model_from_marker) {
+      const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
+      const Eigen::Vector3d centre = camera_from_sticker.translation;
+      const Eigen::Vector3d normal = camera_from_sticker.rotation * Eigen::Vector3d::UnitZ();
+      if (centre.z() < 0.1 || normal.dot(centre) > -0.2 * centre.norm()) continue;
+      std::array<Eigen::Vector2d, 4> px;
+      double perimeter = 0;
+      Eigen::AlignedBox2d box;
+      for (int c = 0; c < 4; ++c) {
+        px[c] = PixelOf(camera_from_sticker * corners_in_marker[c]);
+        box.extend(px[c]);
+      }
+      for (int c = 0; c < 4; ++c) perimeter += (px[(c + 1) % 4] - px[c]).norm();
+      const double side = perimeter / 4;
+      if (side < o.min_sticker_side_px) continue;
+      if (box.min().x() < 2 || box.min().y() < 2 || box.max().x() > K.width - 3 || box.max().y() > K.height - 3) continue;
+      const double margin = std::max(o.sticker_window_margin_px, 0.75 * side);
+      const int x0 = std::max(0, static_cast<int>(std::floor(box.min().x() - margin)));
+      const int y0 = std::max(0, static_cast<int>(std::floor(box.min().y() - margin)));
+      const int x1 = std::min(K.width, static_cast<int>(std::ceil(box.max().x() + margin)) + 1);
+      const int y1 = std::min(K.height, static_cast<int>(std::ceil(box.max().y() + margin)) + 1);
+      if (x1 - x0 < 8 || y1 - y0 < 8) continue;
+      const int k = std::clamp(static_cast<int>(std::ceil(o.detection_side_px / side)), 1, 4);
+      const cv::Mat crop = gray(cv::Rect(x0, y0, x1 - x0, y1 - y0));
+      if (k > 1) {
+        cv::resize(crop, window_up, cv::Size(), k, k, cv::INTER_LINEAR);
+      } else {
+        crop.copyTo(window_up);
+      }
+      coarse->Detect(window_up, &scratch);
+      for (const MarkerObservation& obs : scratch) {
+        if (obs.id != id) continue;
+        std::array<Eigen::Vector2d, 4> initial;
+        for (int c = 0; c < 4; ++c) {
+          // Pixel centres: upsampled (u + 0.5) / k - 0.5 in the window.
+          initial[c] = (obs.detected_corners_px[c] + Eigen::Vector2d(0.5, 0.5)) / k - Eigen::Vector2d(0.5, 0.5) +
+                       Eigen::Vector2d(x0, y0);
+        }
+        const CornerRefinementResult r = RefineMarkerCorners(gray, initial, edge, undistorter, &workspace);
+        MarkerObservation out = obs;
+        out.detected_corners_px = initial;
+        out.status = r.status;
+        out.corners_px = r.corners_px;
+        out.corner_sigma_px = r.corner_sigma_px;
+        out.edge_fit_rms_px = r.edge_fit_rms_px;
+        out.max_segment_offset_px = r.max_segment_offset_px;
+        out.edge_inlier_fraction = r.edge_inlier_fraction;
+        out.contrast_grey = r.contrast_grey;
+        out.blur_sigma_px = r.blur_sigma_px;
+        out.noise_sigma_grey = r.noise_sigma_grey;
+        found->push_back(out);
+        break;
+      }
+    }
+  }
+
+  // Model points facing the camera and in front in a coarse z-buffer.
+  void FindVisible(const Rigid3d& camera_from_model, int cell, double tolerance, int max_points,
+                   Eigen::AlignedBox2d* bounds) {
+    const int gw = (K.width + cell - 1) / cell, gh = (K.height + cell - 1) / cell;
+    zbuffer.assign(static_cast<size_t>(gw) * gh, std::numeric_limits<float>::infinity());
+    const Eigen::Matrix3d R = camera_from_model.RotationMatrix();
+    const Eigen::Vector3d t = camera_from_model.translation;
+    std::vector<std::pair<int, float>> candidates;
+    candidates.reserve(model_points.size() / 2);
+    std::vector<int> cells;
+    cells.reserve(model_points.size() / 2);
+    for (size_t i = 0; i < model_points.size(); ++i) {
+      const Eigen::Vector3d p = R * model_points[i] + t;
+      if (p.z() < 0.1) continue;
+      const Eigen::Vector3d n = R * model_normals[i];
+      if (n.dot(p) > -0.1 * p.norm()) continue;  // back-facing or edge-on
+      const Eigen::Vector2d px = PixelOf(p);
+      if (!(px.x() >= 0 && px.y() >= 0 && px.x() <= K.width - 1 && px.y() <= K.height - 1)) continue;
+      const int c = static_cast<int>(px.y()) / cell * gw + static_cast<int>(px.x()) / cell;
+      zbuffer[c] = std::min(zbuffer[c], static_cast<float>(p.z()));
+      candidates.emplace_back(static_cast<int>(i), static_cast<float>(p.z()));
+      cells.push_back(c);
+    }
+    visible.clear();
+    for (size_t k = 0; k < candidates.size(); ++k) {
+      if (candidates[k].second <= zbuffer[cells[k]] + tolerance) visible.push_back(candidates[k].first);
+    }
+    if (bounds) {
+      bounds->setEmpty();
+      for (int i : visible) bounds->extend(PixelOf(R * model_points[i] + t));
+    }
+    if (static_cast<int>(visible.size()) > max_points) {
+      std::vector<int> thinned;
+      thinned.reserve(max_points);
+      const double step = static_cast<double>(visible.size()) / max_points;
+      for (int k = 0; k < max_points; ++k) thinned.push_back(visible[static_cast<size_t>(k * step)]);
+      visible.swap(thinned);
+    }
+  }
+};
+
+BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
+                         const CameraIntrinsics& intrinsics, const BodyTrackerOptions& options)
+    : options_(options), impl_(std::make_unique<Impl>()) {
+  const std::string problem = options_.Validate();
+  ARPOS_CHECK(problem.empty(), "body tracker options: " << problem);
+  const std::string k_problem = intrinsics.Validate();
+  ARPOS_CHECK(k_problem.empty(), "body tracker intrinsics: " << k_problem);
+  if (model.empty()) ARPOS_INPUT_ERROR("body tracking: the reference model has no faces");
+  if (model_from_marker.empty()) ARPOS_INPUT_ERROR("body tracking: the session has no mapped stickers");
+  Impl& m = *impl_;
+  m.K = intrinsics;
+  m.distorted = intrinsics.HasDistortion();
+  if (m.distorted) {
+    std::vector<cv::Point2f> grid;
+    grid.reserve(static_cast<size_t>(intrinsics.width) * intrinsics.height);
+    for (int v = 0; v < intrinsics.height; ++v) {
+      for (int u = 0; u < intrinsics.width; ++u) grid.emplace_back(static_cast<float>(u), static_cast<float>(v));
+    }
+    std::vector<cv::Point2f> normalised;
+    cv::undistortPoints(grid, normalised, cv::Mat(intrinsics.CvK()), intrinsics.CvDistortion());
+    m.rays.create(intrinsics.height, intrinsics.width, CV_32FC2);
+    for (int v = 0, k = 0; v < intrinsics.height; ++v) {
+      for (int u = 0; u < intrinsics.width; ++u, ++k) {
+        m.rays.at<cv::Vec2f>(v, u) = cv::Vec2f(normalised[k].x, normalised[k].y);
+      }
+    }
+  }
+  const PointCloud surface = SampleMeshSurface(model, options_.model_spacing_m);
+  m.model_points.reserve(surface.size());
+  m.model_normals.reserve(surface.size());
+  for (size_t i = 0; i < surface.size(); ++i) {
+    m.model_points.push_back(surface.point3(i));
+    m.model_normals.push_back(surface.normal3(i));
+  }
+  m.model_from_marker = std::move(model_from_marker);
+  m.corners_in_marker = MarkerCornersInMarker(options_.marker_size_m);
+  MarkerDetectorOptions detector = options_.detector;
+  detector.intrinsics = intrinsics;
+  detector.keep_unreliable = true;
+  m.detector = std::make_unique<MarkerDetector>(detector);
+  MarkerDetectorOptions coarse = options_.detector;
+  coarse.refinement = CornerRefinementMethod::kOpenCvNone;
+  coarse.intrinsics.reset();
+  coarse.min_marker_perimeter_px = 20;
+  m.coarse = std::make_unique<MarkerDetector>(coarse);
+  m.edge = options_.detector.edge;
+  m.edge.marker_bits = m.detector->marker_bits();
+  m.undistorter = PixelUndistorter(intrinsics);
+}
+
+BodyTracker::~BodyTracker() = default;
+
+void BodyTracker::Reset() {
+  impl_->past.clear();
+  impl_->frames_without_stickers = 0;
+}
+
+BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint) {
+  const auto start = Clock::now();
+  Impl& m = *impl_;
+  const BodyTrackerOptions& o = options_;
+  BodyPoseResult result;
+  auto finish = [&](BodyPoseResult r) {
+    r.timings.total_ms = MsSince(start);
+    if (!r.ok) {
+      ++m.frames_without_stickers;
+    }
+    return r;
+  };
+  if (frame.color.empty() || frame.color.cols != m.K.width || frame.color.rows != m.K.height ||
+      frame.color.type() != CV_8UC3) {
+    result.message = "no usable colour image";
+    return finish(result);
+  }
+  const bool have_depth = o.use_depth && !frame.depth.empty() && frame.depth.type() == CV_16UC1 &&
+                          frame.depth.cols == m.K.width && frame.depth.rows == m.K.height;
+
+  // 1. Prediction (constant velocity of camera_from_model) and the window.
+  std::optional<Rigid3d> predicted;
+  if (!m.past.empty() && frame.timestamp_s - m.past.back().t < 0.5 &&
+      frame.timestamp_s >= m.past.back().t) {
+    predicted = m.past.back().pose;
+    if (m.past.size() == 2) {
+      const double dt01 = m.past[1].t - m.past[0].t, dt12 = frame.timestamp_s - m.past[1].t;
+      if (dt01 > 1e-4 && dt01 < 0.5) {
+        const Rigid3d step = m.past[1].pose * m.past[0].pose.Inverse();
+        const double a = std::min(2.0, dt12 / dt01);
+        predicted = Rigid3d::FromRotationVector(a * step.RotationVector(), a * step.translation) * m.past[1].pose;
+      }
+    }
+  }
+  const bool from_hint = !predicted && hint.has_value();
+  if (from_hint) predicted = hint;
+
+  // 2. Stickers: around their predicted corners (small windows, upsampled
+  // for ArUco when the sticker is small, corners refined on the frame
+  // itself), else in the whole image.
+  const auto t_detect = Clock::now();
+  cv::cvtColor(frame.color, m.gray, cv::COLOR_BGR2GRAY);
+  std::vector<MarkerObservation> found;
+  if (predicted) m.SearchAround(*predicted, o, &found);
+  if (found.empty() && (!predicted || from_hint)) {
+    m.detector->Detect(m.gray, &m.scratch);
+    found = m.scratch;
+  }
+  std::vector<SeenSticker> stickers;
+  {
+    std::vector<cv::Point2d> raw;
+    for (const auto& obs : found) {
+      const auto it = m.model_from_marker.find(obs.id);
+      if (it == m.model_from_marker.end()) continue;
+      if (obs.status != MarkerStatus::kRefined && obs.status != MarkerStatus::kPartiallyOccluded) continue;
+      SeenSticker s;
+      s.id = obs.id;
+      s.marker_from_model = it->second.Inverse();
+      for (int c = 0; c < 4; ++c) {
+        s.corners_in_model[c] = it->second * m.corners_in_marker[c];
+        s.sigma_px[c] = std::max(o.corner_sigma_px, obs.corner_sigma_px[c]);
+        if (obs.status == MarkerStatus::kPartiallyOccluded) s.sigma_px[c] *= 2;
+        raw.emplace_back(obs.corners_px[c].x(), obs.corners_px[c].y());
+      }
+      s.single_view = EstimateMarkerPose(obs, o.marker_size_m, m.K, have_depth ? frame.depth : cv::Mat(),
+                                         o.marker_pose);
+      stickers.push_back(s);
+    }
+    if (!raw.empty()) {
+      std::vector<cv::Point2d> normalised;
+      if (m.distorted) {
+        cv::undistortPoints(raw, normalised, cv::Mat(m.K.CvK()), m.K.CvDistortion());
+      } else {
+        for (const auto& p : raw) normalised.emplace_back((p.x - m.K.cx) / m.K.fx, (p.y - m.K.cy) / m.K.fy);
+      }
+      for (size_t s = 0; s < stickers.size(); ++s) {
+        for (int c = 0; c < 4; ++c) {
+          stickers[s].normalised[c] = Eigen::Vector2d(normalised[4 * s + c].x, normalised[4 * s + c].y);
+        }
+      }
+    }
+  }
+  result.timings.detection_ms = MsSince(t_detect);
+  ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
+                            << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
+  const auto t_pose = Clock::now();
+
+  auto sticker_rms = [&](const Rigid3d& camera_from_model, const SeenSticker& s) {
+    double sum = 0;
+    for (int c = 0; c < 4; ++c) {
+      const Eigen::Vector3d p = camera_from_model * s.corners_in_model[c];
+      if (p.z() < 1e-3) return 1e3;
+      const Eigen::Vector2d e(m.K.fx * (p.x() / p.z() - s.normalised[c].x()),
+                              m.K.fy * (p.y() / p.z() - s.normalised[c].y()));
+      sum += e.squaredNorm();
+    }
+    return std::sqrt(sum / 4);
+  };
+
+  // 3. Start pose: the candidate that explains every sticker best.
+  std::optional<Rigid3d> start_pose;
+  if (!stickers.empty()) {
+    std::vector<Rigid3d> candidates;
+    if (predicted) candidates.push_back(*predicted);
+    // Ties (one sticker's two IPPE solutions explain it alike) go to the
+    // earlier candidate: the prediction, then the depth-chosen poses.
+    for (const auto& s : stickers) {
+      if (s.single_view.status == MarkerPoseStatus::kOk) {
+        candidates.push_back(s.single_view.camera_from_marker * s.marker_from_model);
+      }
+    }
+    for (const auto& s : stickers) {
+      for (int k = 0; k < s.single_view.num_solutions; ++k) {
+        candidates.push_back(s.single_view.solutions[k].camera_from_marker * s.marker_from_model);
+      }
+    }
+    double best = std::numeric_limits<double>::infinity();
+    for (const auto& c : candidates) {
+      double cost = 0;
+      for (const auto& s : stickers) cost += std::min(sticker_rms(c, s), 30.0);
+      if (cost < best - 1e-9) best = cost, start_pose = c;
+    }
+  } else if (predicted && m.frames_without_stickers < o.max_frames_without_stickers && have_depth) {
+    start_pose = predicted;
+  }
+  if (!start_pose) {
+    result.message = stickers.empty() ? "no sticker in view" : "no sticker pose";
+    result.timings.pose_ms = MsSince(t_pose);
+    return finish(result);
+  }
+
+  // 4. Joint refinement of corners and depth; disagreeing stickers dropped.
+  const bool carried = stickers.empty();
+  std::vector<char> use(stickers.size(), 1);
+  Rigid3d pose = *start_pose;
+  Matrix6d H_final = Matrix6d::Zero();
+  double chi2 = 0;
+  int dof = 0, depth_inliers = 0, depth_candidates = 0;
+  double depth_sq = 0;
+  for (int round = 0; round < 4; ++round) {
+    pose = *start_pose;
+    for (int it = 0; it < o.max_iterations; ++it) {
+      Matrix6d H = Matrix6d::Zero();
+      Vector6d g = Vector6d::Zero();
+      chi2 = 0;
+      dof = -6;
+      for (size_t si = 0; si < stickers.size(); ++si) {
+        if (!use[si]) continue;
+        const SeenSticker& s = stickers[si];
+        for (int c = 0; c < 4; ++c) {
+          const Eigen::Vector3d p = pose * s.corners_in_model[c];
+          if (p.z() < 1e-3) continue;
+          const double iz = 1.0 / p.z();
+          const Eigen::Vector2d r(m.K.fx * (p.x() * iz - s.normalised[c].x()) / s.sigma_px[c],
+                                  m.K.fy * (p.y() * iz - s.normalised[c].y()) / s.sigma_px[c]);
+          Eigen::Matrix<double, 2, 3> dproj;
+          dproj << m.K.fx * iz / s.sigma_px[c], 0, -m.K.fx * p.x() * iz * iz / s.sigma_px[c], 0,
+              m.K.fy * iz / s.sigma_px[c], -m.K.fy * p.y() * iz * iz / s.sigma_px[c];
+          Eigen::Matrix<double, 3, 6> dp;
+          dp << -Skew(p), Eigen::Matrix3d::Identity();
+          const Eigen::Matrix<double, 2, 6> J = dproj * dp;
+          const double norm = r.norm();
+          const double w = norm <= o.huber_sigmas ? 1.0 : o.huber_sigmas / norm;
+          H += w * J.transpose() * J;
+          g += w * J.transpose() * r;
+          chi2 += w * r.squaredNorm();
+          dof += 2;
+        }
+      }
+      // Depth: projective association of the visible model points.
+      depth_inliers = 0;
+      depth_candidates = 0;
+      depth_sq = 0;
+      if (have_depth) {
+        // Visibility from the start pose, then once more near convergence.
+        if (it == 0 || it == 3) m.FindVisible(pose, o.zbuffer_cell_px, o.zbuffer_tolerance_m, o.max_depth_points, nullptr);
+        const double gate = it < 2 ? o.depth_gate_initial_m : o.depth_gate_final_m;
+        const Eigen::Matrix3d R = pose.RotationMatrix();
+        Matrix6d Hd = Matrix6d::Zero();
+        Vector6d gd = Vector6d::Zero();
+        double chi2d = 0;
+        for (int i : m.visible) {
+          const Eigen::Vector3d p = R * m.model_points[i] + pose.translation;
+          const Eigen::Vector2d px = m.PixelOf(p);
+          const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+          if (u < 0 || v < 0 || u >= m.K.width || v >= m.K.height) continue;
+          const uint16_t raw = frame.depth.at<uint16_t>(v, u);
+          if (raw == 0) continue;
+          ++depth_candidates;
+          const double z = raw / frame.depth_scale;
+          const Eigen::Vector2d ray = m.RayOf(u, v);
+          const Eigen::Vector3d q(ray.x() * z, ray.y() * z, z);
+          const Eigen::Vector3d d = p - q;
+          if (d.norm() > gate) continue;
+          const Eigen::Vector3d n = R * m.model_normals[i];
+          const double sigma = o.depth_sigma_const_m + o.depth_sigma_quad_per_m * z * z;
+          const double r = n.dot(d) / sigma;
+          Vector6d J;
+          J << p.cross(n) / sigma, n / sigma;
+          const double w = std::abs(r) <= o.huber_sigmas ? 1.0 : o.huber_sigmas / std::abs(r);
+          Hd += w * J * J.transpose();
+          gd += w * J * r;
+          chi2d += w * r * r;
+          ++depth_inliers;
+          depth_sq += (n.dot(d)) * (n.dot(d));
+        }
+        if (depth_inliers > 0) {
+          const double scale = depth_inliers > o.depth_max_effective
+                                   ? static_cast<double>(o.depth_max_effective) / depth_inliers
+                                   : 1.0;
+          H += scale * Hd;
+          g += scale * gd;
+          chi2 += scale * chi2d;
+          dof += std::min(depth_inliers, o.depth_max_effective);
+        }
+      }
+      // Without stickers the surface can slide along itself: a weak prior
+      // on the prediction keeps those directions where they were.
+      if (carried && predicted) {
+        const Rigid3d delta = pose * predicted->Inverse();
+        Vector6d r;
+        r << delta.RotationVector() / (3.14159265358979 / 180.0 * 1.0), delta.translation / 0.005;
+        Matrix6d J = Matrix6d::Zero();
+        J.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() / (3.14159265358979 / 180.0);
+        J.bottomRightCorner<3, 3>() = Eigen::Matrix3d::Identity() / 0.005;
+        J.bottomLeftCorner<3, 3>() = -Skew(predicted->translation) / 0.005;
+        H += J.transpose() * J;
+        g += J.transpose() * r;
+      }
+      H_final = H;
+      Eigen::LDLT<Matrix6d> ldlt(H + 1e-9 * Matrix6d::Identity());
+      const Vector6d step = -ldlt.solve(g);
+      if (!step.allFinite()) break;
+      pose = Rigid3d::FromRotationVector(step.head<3>(), step.tail<3>()) * pose;
+      if (step.head<3>().norm() < 1e-6 && step.tail<3>().norm() < 1e-6) break;
+    }
+    // Drop the worst sticker if it disagrees with the rest and the surface.
+    int worst = -1;
+    double worst_rms = o.max_sticker_rms_px;
+    for (size_t si = 0; si < stickers.size(); ++si) {
+      if (!use[si]) continue;
+      const double r = sticker_rms(pose, stickers[si]);
+      if (r > worst_rms) worst_rms = r, worst = static_cast<int>(si);
+    }
+    if (worst < 0) break;
+    use[worst] = 0;
+    result.stickers_dropped.push_back(stickers[worst].id);
+    if (std::count(use.begin(), use.end(), 1) == 0) break;
+  }
+  double rms_sum = 0;
+  for (size_t si = 0; si < stickers.size(); ++si) {
+    if (!use[si]) continue;
+    result.sticker_ids.push_back(stickers[si].id);
+    const double r = sticker_rms(pose, stickers[si]);
+    rms_sum += r * r;
+  }
+  const int n_stickers = static_cast<int>(result.sticker_ids.size());
+  result.sticker_rms_px = n_stickers ? std::sqrt(rms_sum / n_stickers) : 0;
+  result.depth_inliers = depth_inliers;
+  result.depth_rms_mm = depth_inliers ? 1000 * std::sqrt(depth_sq / depth_inliers) : 0;
+  const double inlier_fraction = depth_candidates ? static_cast<double>(depth_inliers) / depth_candidates : 0;
+  const bool surface_ok = depth_inliers >= o.min_depth_inliers && inlier_fraction >= o.min_depth_inlier_fraction;
+
+  ARPOS_DEBUG("body frame " << frame.index << ": " << n_stickers << " stickers (rms " << result.sticker_rms_px
+                            << " px), depth " << depth_inliers << "/" << depth_candidates << " inliers, rms "
+                            << result.depth_rms_mm << " mm");
+  // 5. Acceptance and uncertainty.
+  Matrix6d cov = Matrix6d::Identity() * 1e6;
+  Eigen::FullPivLU<Matrix6d> lu(H_final);
+  if (lu.isInvertible()) cov = lu.inverse();
+  const double reduced = dof > 0 ? chi2 / dof : 1.0;
+  cov *= std::max(1.0, reduced);
+  Eigen::Matrix<double, 3, 6> at_origin;
+  at_origin << -Skew(pose.translation), Eigen::Matrix3d::Identity();
+  const Eigen::Matrix3d pos_cov = at_origin * cov * at_origin.transpose();
+  const Eigen::Matrix3d rot_cov = cov.topLeftCorner<3, 3>();
+  result.covariance = cov;
+  result.position_sigma_mm = 1000 * std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(pos_cov).eigenvalues().maxCoeff()));
+  result.rotation_sigma_deg = 180.0 / 3.14159265358979 *
+                              std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(rot_cov).eigenvalues().maxCoeff()));
+  result.timings.pose_ms = MsSince(t_pose);
+
+  bool accept = false;
+  if (n_stickers >= 2) {
+    accept = true;
+  } else if (n_stickers == 1) {
+    accept = surface_ok;
+    if (!accept) result.message = "one sticker and too little surface in depth";
+  } else if (carried) {
+    accept = surface_ok;
+    if (!accept) result.message = StringPrintf("no sticker; the surface alone does not hold (%d depth inliers, %.0f %%)",
+                                               depth_inliers, 100 * inlier_fraction);
+  } else {
+    result.message = "every sticker disagreed with the others and the surface";
+  }
+  if (accept && !(result.position_sigma_mm <= 1000 * o.max_position_sigma_m)) {
+    accept = false;
+    result.message = StringPrintf("pose too uncertain (%.1f mm)", result.position_sigma_mm);
+  }
+  if (!pose.translation.allFinite() || pose.translation.z() <= 0) accept = false;
+  if (!accept) {
+    if (result.message.empty()) result.message = "rejected";
+    return finish(result);
+  }
+  result.ok = true;
+  result.camera_from_model = pose;
+  result.source = carried ? BodyPoseSource::kCarried : BodyPoseSource::kStickers;
+  if (carried) {
+    ++m.frames_without_stickers;
+    result.message = StringPrintf("no sticker in view: carried on the surface (%d of %d frames)",
+                                  m.frames_without_stickers, o.max_frames_without_stickers);
+  } else {
+    m.frames_without_stickers = 0;
+  }
+  result.frames_without_stickers = m.frames_without_stickers;
+  m.past.push_back({frame.timestamp_s, pose});
+  while (m.past.size() > 2) m.past.pop_front();
+  result.timings.total_ms = MsSince(start);
+  return result;
+}
+
+}  // namespace arpos

@@ -1,0 +1,166 @@
+#pragma once
+/// Patient (reference model) pose in the camera frame, frame after frame: the
+/// body half of tracking mode.
+///
+/// Per frame:
+///  1. stickers: the session's body stickers are detected in a window around
+///     where the model was last seen (the whole image after a loss);
+///  2. start: the candidate pose (the prediction from the last two poses, or
+///     a single sticker's own pose, IPPE + depth) that explains every
+///     sticker's corners best;
+///  3. joint refinement (Gauss-Newton, left perturbation in the camera frame)
+///     of the sticker corners (pixels, each with its edge-fit sigma) and the
+///     depth against the model's surface points the camera sees
+///     (point-to-plane along the model normal, projective association:
+///     each visible model point meets the depth pixel it projects to; hidden
+///     points removed with a coarse z-buffer, the surface sampled every few
+///     mm so close vertices are merged). Depth errors are partly systematic,
+///     so all depth terms together count as at most `depth_max_effective`
+///     independent readings; a robust kernel keeps breathing, hands and
+///     flying pixels from pulling the pose;
+///  4. a sticker that disagrees with the others and the surface (moved, fell
+///     off, misread) is dropped and the fit repeated;
+///  5. acceptance: two stickers, or one with the surface, or, for at most
+///     `max_frames_without_stickers` frames, the surface alone from the
+///     predicted pose ("carried", and said so); otherwise the patient is lost
+///     and nothing is guessed.
+/// The pose's covariance comes from the refinement's information matrix,
+/// scaled up by the residuals when they exceed their sigmas.
+///
+/// Frames: camera = OpenCV; model = the reference model's frame (metres).
+/// Thread-safety: one BodyTracker per thread; it may run beside a
+/// CameraLocalizer on another thread.
+
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "features/marker_detector.h"
+#include "features/marker_pose.h"
+#include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
+#include "sensor/intrinsics.h"
+#include "sensor/rgbd_frame.h"
+
+namespace arpos {
+
+struct BodyTrackerOptions {
+  /// Sticker detection (dictionary, the body id range, the recording's response).
+  MarkerDetectorOptions detector;
+  MarkerPoseOptions marker_pose;
+  double marker_size_m = 0.03;
+
+  /// The model's surface sampled every this many metres (vertices merged).
+  double model_spacing_m = 0.005;
+  /// Hidden-point removal: z-buffer cells (px) and the depth tolerance behind
+  /// the nearest surface point of a cell.
+  int zbuffer_cell_px = 4;
+  double zbuffer_tolerance_m = 0.012;
+  /// At most this many visible model points enter the fit (evenly thinned).
+  int max_depth_points = 2500;
+  bool use_depth = true;
+
+  /// Corner noise floor (px, 1 sigma); the edge fit's own sigma when larger.
+  double corner_sigma_px = 0.15;
+  /// Depth noise per reading, sigma(z) = const + quad * z^2, and the number
+  /// of independent readings all depth terms together are worth.
+  double depth_sigma_const_m = 0.001;
+  double depth_sigma_quad_per_m = 0.0015;
+  int depth_max_effective = 60;
+  /// Association gate (model point to its depth reading) at the first
+  /// iteration and from the third on.
+  double depth_gate_initial_m = 0.03;
+  double depth_gate_final_m = 0.012;
+  /// Huber threshold on normalised residuals (sigmas), corners and depth.
+  double huber_sigmas = 2.5;
+  int max_iterations = 10;
+
+  /// A sticker whose corner RMS exceeds this after the fit is dropped.
+  double max_sticker_rms_px = 1.2;
+  /// While tracking, each sticker is searched in a window around its
+  /// predicted corners (margin: max(this, 0.75 side), px), upsampled so the
+  /// sticker is about `detection_side_px` across for ArUco (at most 4x), its
+  /// corners then refined on the frame itself; stickers predicted smaller
+  /// than `min_sticker_side_px` are not searched. Without a prediction the
+  /// whole image is searched.
+  double sticker_window_margin_px = 12;
+  double detection_side_px = 30;
+  double min_sticker_side_px = 6;
+  /// Surface-only ("carried") frames allowed after the last frame with a
+  /// sticker; and what the surface must show for them.
+  int max_frames_without_stickers = 5;
+  double min_depth_inlier_fraction = 0.5;
+  int min_depth_inliers = 200;
+  /// A pose whose own 1-sigma position uncertainty at the model origin
+  /// exceeds this is not reported (m).
+  double max_position_sigma_m = 0.01;
+
+  std::string Validate() const;
+};
+
+enum class BodyPoseSource {
+  kStickers = 0,           ///< stickers (and the surface where depth agreed)
+  kCarried = 1,            ///< no sticker: the surface alone from the prediction
+  kLost = 2,
+};
+const char* BodyPoseSourceName(BodyPoseSource source);
+
+struct BodyTrackingTimings {
+  double detection_ms = 0;  ///< sticker detection and corner refinement
+  double pose_ms = 0;       ///< start pose, refinement with depth, checks
+  double total_ms = 0;
+};
+
+struct BodyPoseResult {
+  bool ok = false;
+  Rigid3d camera_from_model;  ///< meaningful only when ok
+  BodyPoseSource source = BodyPoseSource::kLost;
+  std::vector<int> sticker_ids;     ///< stickers used
+  std::vector<int> stickers_dropped;  ///< seen but disagreeing
+  double sticker_rms_px = 0;
+  int depth_inliers = 0;
+  double depth_rms_mm = 0;
+  /// Covariance of a left perturbation (omega, v) of camera_from_model, in
+  /// the camera frame (rad, m).
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  double position_sigma_mm = 0;  ///< at the model origin, largest axis
+  double rotation_sigma_deg = 0;  ///< largest axis
+  int frames_without_stickers = 0;
+  std::string message;  ///< why, when lost or carried
+  BodyTrackingTimings timings;
+};
+
+class BodyTracker {
+ public:
+  /// `model`: the reference model (model frame, metres). `model_from_marker`:
+  /// each mapped sticker in the model frame (the session's body marker map
+  /// and alignment). Throws arpos::Error for invalid options, InputError for
+  /// an empty model or no stickers.
+  BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
+              const CameraIntrinsics& intrinsics, const BodyTrackerOptions& options);
+  ~BodyTracker();
+  BodyTracker(const BodyTracker&) = delete;
+  BodyTracker& operator=(const BodyTracker&) = delete;
+
+  /// One frame (colour BGR CV_8UC3, depth CV_16UC1 or empty). Never throws for
+  /// bad data: an unusable frame is lost with a message.
+  /// `hint`: where the caller expects the model (e.g. the patient's last room
+  /// pose seen from the camera's last room pose), used when the tracker has
+  /// no recent pose of its own.
+  BodyPoseResult Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint = std::nullopt);
+  /// Forgets the last poses: the next frame starts from the stickers alone.
+  void Reset();
+
+  const BodyTrackerOptions& options() const { return options_; }
+
+ private:
+  struct Impl;
+  BodyTrackerOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace arpos

@@ -1,0 +1,161 @@
+#include "tracking/tracker.h"
+
+#include <chrono>
+#include <cmath>
+#include <future>
+
+#include "util/check.h"
+#include "util/string_util.h"
+
+namespace arpos {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+constexpr double kDegPerRad = 180.0 / 3.14159265358979323846;
+}  // namespace
+
+std::string TrackerOptions::Validate() const {
+  std::string problem = camera.Validate();
+  if (!problem.empty()) return "camera: " + problem;
+  problem = body.Validate();
+  if (!problem.empty()) return "body: " + problem;
+  problem = tolerances.Validate();
+  if (!problem.empty()) return problem;
+  if (!(uncertainty_sigmas >= 0)) return "uncertainty_sigmas must not be negative";
+  if (!(uncertainty_floor_mm >= 0) || !(uncertainty_floor_deg >= 0)) return "uncertainty floors must not be negative";
+  return "";
+}
+
+const char* TrackingStateName(TrackingState state) {
+  switch (state) {
+    case TrackingState::kTracked: return "tracked";
+    case TrackingState::kCarried: return "carried";
+    case TrackingState::kLost: return "lost";
+  }
+  return "lost";
+}
+
+Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
+                 const Rigid3d& room_from_model_target, const CameraIntrinsics& intrinsics,
+                 const TrackerOptions& options)
+    : options_(options), target_(room_from_model_target), intrinsics_(intrinsics) {
+  const std::string problem = options_.Validate();
+  ARPOS_CHECK(problem.empty(), "tracker options: " << problem);
+  camera_ = std::make_unique<CameraLocalizer>(std::move(map), intrinsics, options_.camera);
+  body_ = std::make_unique<BodyTracker>(model, std::move(model_from_marker), intrinsics, options_.body);
+}
+
+Tracker::~Tracker() = default;
+
+TrackedFrame Tracker::Process(const RgbdFrame& input) {
+  const auto start = Clock::now();
+  TrackedFrame out;
+  out.index = input.index;
+  out.timestamp_s = input.timestamp_s;
+  out.correction = LostCorrection();
+  // Frames that cannot be read as the camera's are lost, with the reason;
+  // unusable depth is dropped and the frame goes on without it.
+  RgbdFrame frame = input;
+  if (frame.color.empty() || frame.color.type() != CV_8UC3 || frame.color.cols != intrinsics_.width ||
+      frame.color.rows != intrinsics_.height) {
+    out.message = frame.color.empty() ? "no colour image (missing or unreadable)"
+                                      : StringPrintf("colour image %dx%d (type %d), the camera is %dx%d BGR",
+                                                     frame.color.cols, frame.color.rows, frame.color.type(),
+                                                     intrinsics_.width, intrinsics_.height);
+    out.timings.total_ms = MsSince(start);
+    return out;
+  }
+  std::string depth_note;
+  if (!frame.depth.empty() && (frame.depth.type() != CV_16UC1 || frame.depth.size() != frame.color.size())) {
+    frame.depth = cv::Mat();
+    depth_note = "depth unusable (type or size): ignored";
+  } else if (frame.depth.empty()) {
+    depth_note = "no depth";
+  }
+
+  auto run_camera = [&] {
+    const auto t0 = Clock::now();
+    LocalizationResult r;
+    try {
+      r = camera_->Localize(frame);
+    } catch (const std::exception& e) {
+      r = LocalizationResult();
+      r.message = e.what();
+    }
+    out.timings.camera_ms = MsSince(t0);
+    return r;
+  };
+  // The patient is where it was last seen in the room, seen from where the
+  // camera last was (both recent): a start for the body tracker after a loss.
+  std::optional<Rigid3d> hint;
+  if (last_room_from_camera_ && last_room_from_model_ && frame.timestamp_s - last_camera_t_ < 0.5 &&
+      frame.timestamp_s - last_model_t_ < 5.0) {
+    hint = last_room_from_camera_->Inverse() * *last_room_from_model_;
+  }
+  auto run_body = [&] {
+    const auto t0 = Clock::now();
+    BodyPoseResult r = body_->Track(frame, hint);
+    out.timings.body_ms = MsSince(t0);
+    return r;
+  };
+  try {
+    if (options_.parallel) {
+      std::future<BodyPoseResult> body = std::async(std::launch::async, run_body);
+      out.camera = run_camera();
+      out.body = body.get();
+    } else {
+      out.camera = run_camera();
+      out.body = run_body();
+    }
+  } catch (const std::exception& e) {
+    out.message = std::string("frame could not be processed: ") + e.what();
+    out.timings.total_ms = MsSince(start);
+    return out;
+  }
+  out.timings.camera = out.camera.timings;
+  if (out.camera.ok) {
+    last_room_from_camera_ = out.camera.room_from_camera;
+    last_camera_t_ = frame.timestamp_s;
+  }
+  out.timings.body = out.body.timings;
+
+  const auto t_combine = Clock::now();
+  if (out.camera.ok) out.room_from_camera = out.camera.room_from_camera;
+  if (out.body.ok) out.camera_from_model = out.body.camera_from_model;
+  if (!out.camera.ok || !out.body.ok) {
+    std::string why;
+    if (!out.camera.ok) why = "camera not localised in the room" + (out.camera.message.empty() ? "" : " (" + out.camera.message + ")");
+    if (!out.body.ok) {
+      why += (why.empty() ? "" : "; ") + std::string("patient not found") +
+             (out.body.message.empty() ? "" : " (" + out.body.message + ")");
+    }
+    if (!depth_note.empty()) why += "; " + depth_note;
+    out.message = why;
+  } else {
+    out.room_from_model = out.camera.room_from_camera * out.body.camera_from_model;
+    last_room_from_model_ = out.room_from_model;
+    last_model_t_ = frame.timestamp_s;
+    out.state = out.body.source == BodyPoseSource::kCarried ? TrackingState::kCarried : TrackingState::kTracked;
+    // Uncertainty at the isocentre: the camera's own position error, its
+    // rotation error swinging the isocentre at its distance, and the body's.
+    const double distance_m = out.body.camera_from_model.translation.norm();
+    const double cam_rot_rad = out.camera.rotation_sigma_deg / kDegPerRad;
+    const double cam_pos_mm = out.camera.position_sigma_mm;
+    out.position_sigma_mm = std::sqrt(cam_pos_mm * cam_pos_mm + std::pow(1000 * cam_rot_rad * distance_m, 2) +
+                                      out.body.position_sigma_mm * out.body.position_sigma_mm);
+    out.rotation_sigma_deg = std::hypot(out.camera.rotation_sigma_deg, out.body.rotation_sigma_deg);
+    CorrectionUncertainty bound;
+    bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out.position_sigma_mm);
+    bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out.rotation_sigma_deg);
+    out.correction = ComputeCouchCorrection(*out.room_from_model, target_, bound, options_.tolerances);
+    out.message = out.body.source == BodyPoseSource::kCarried ? out.body.message : depth_note;
+  }
+  out.timings.combine_ms = MsSince(t_combine);
+  out.timings.total_ms = MsSince(start);
+  return out;
+}
+
+}  // namespace arpos

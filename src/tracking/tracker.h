@@ -1,0 +1,119 @@
+#pragma once
+/// Tracking mode, one frame at a time: where the camera is in the room, where
+/// the patient is, and the couch correction to the planned pose.
+///
+/// Per frame, on two threads at once:
+///  - scene: the camera pose in the room (CameraLocalizer: room markers and
+///    keypoints against the plan's room map);
+///  - body: the reference model's pose in the camera (BodyTracker: stickers
+///    of the session's body marker map refined with depth on the model's
+///    visible surface).
+/// Then room_from_model = room_from_camera * camera_from_model, its
+/// uncertainty at the isocentre (the camera's position and rotation errors,
+/// the latter acting over the camera-to-isocentre distance, and the body's),
+/// and the correction (feedback/couch_correction.h) with that uncertainty
+/// (`uncertainty_sigmas` of it) added before the tolerance test.
+/// A frame is lost when either half is lost; nothing is guessed.
+///
+/// Thread-safety: one Tracker per stream; Process() is called from one thread.
+
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "feedback/couch_correction.h"
+#include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
+#include "room_map/camera_localizer.h"
+#include "room_map/room_map.h"
+#include "sensor/intrinsics.h"
+#include "sensor/rgbd_frame.h"
+#include "tracking/body_tracker.h"
+
+namespace arpos {
+
+struct TrackerOptions {
+  CameraLocalizerOptions camera;
+  BodyTrackerOptions body;
+  CouchTolerances tolerances;
+  /// The correction's uncertainty bound is this many sigmas of the pose's
+  /// own uncertainty, at least the floors below.
+  double uncertainty_sigmas = 3.0;
+  double uncertainty_floor_mm = 0.3;
+  double uncertainty_floor_deg = 0.05;
+  /// Scene and body on two threads (false: one after the other, e.g. to
+  /// measure each alone).
+  bool parallel = true;
+
+  std::string Validate() const;
+};
+
+/// Milliseconds per step of one frame (wall clock of the thread that did it).
+struct TrackingTimings {
+  LocalizationTimings camera;  ///< CPU ms of the scene thread, by step
+  BodyTrackingTimings body;
+  double camera_ms = 0;   ///< wall ms of the scene half
+  double body_ms = 0;     ///< wall ms of the body half
+  double combine_ms = 0;  ///< pose, uncertainty, correction
+  double total_ms = 0;    ///< frame handed over to correction ready
+};
+
+enum class TrackingState {
+  kTracked = 0,   ///< camera and patient from this frame's data
+  kCarried = 1,   ///< patient carried on the surface without stickers
+  kLost = 2,      ///< no pose (camera or patient)
+};
+const char* TrackingStateName(TrackingState state);
+
+struct TrackedFrame {
+  int index = -1;
+  double timestamp_s = 0;
+  TrackingState state = TrackingState::kLost;
+  std::optional<Rigid3d> room_from_camera;
+  std::optional<Rigid3d> camera_from_model;
+  std::optional<Rigid3d> room_from_model;
+  /// 1-sigma uncertainty of room_from_model: position at the isocentre
+  /// (largest axis) and rotation.
+  double position_sigma_mm = 0;
+  double rotation_sigma_deg = 0;
+  CouchCorrection correction;
+  LocalizationResult camera;
+  BodyPoseResult body;
+  std::string message;  ///< why lost or carried
+  TrackingTimings timings;
+};
+
+class Tracker {
+ public:
+  /// `map`: the plan's room map; `model`: the reference model; `model_from_marker`:
+  /// the session's stickers in the model frame; `room_from_model_target`: the
+  /// planned pose. Throws arpos::Error for invalid options, InputError for
+  /// unusable inputs.
+  Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
+          const Rigid3d& room_from_model_target, const CameraIntrinsics& intrinsics,
+          const TrackerOptions& options);
+  ~Tracker();
+  Tracker(const Tracker&) = delete;
+  Tracker& operator=(const Tracker&) = delete;
+
+  /// One frame. Never throws for bad data (a frame without depth or with a
+  /// broken image is processed as far as it goes, or lost with a message).
+  TrackedFrame Process(const RgbdFrame& frame);
+
+  const Rigid3d& room_from_model_target() const { return target_; }
+  const TrackerOptions& options() const { return options_; }
+
+ private:
+  TrackerOptions options_;
+  Rigid3d target_;
+  CameraIntrinsics intrinsics_;
+  std::unique_ptr<CameraLocalizer> camera_;
+  std::unique_ptr<BodyTracker> body_;
+  // The last room poses of camera and patient: where to look for the
+  // patient when the body tracker has lost it.
+  std::optional<Rigid3d> last_room_from_camera_, last_room_from_model_;
+  double last_camera_t_ = -1, last_model_t_ = -1;
+};
+
+}  // namespace arpos

@@ -1,0 +1,341 @@
+#include "tracking/tracking_stage.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "features/response_from_recording.h"
+#include "sensor/sequence.h"
+#include "sensor/tum_io.h"
+#include "store/database.h"
+#include "store/record_conversions.h"
+#include "tracking/overlay.h"
+#include "util/check.h"
+#include "util/file.h"
+#include "util/string_util.h"
+
+namespace arpos {
+
+namespace {
+using Clock = std::chrono::steady_clock;
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+// The newest alignment of the newest reconstruction of a session, and its
+// newest body marker map; nullopt when the session lacks either.
+struct SessionPieces {
+  BodyMarkerMapId marker_map;
+  AlignmentRecord alignment;
+};
+std::optional<SessionPieces> PiecesOf(Database* database, SessionId session) {
+  const std::vector<BodyMarkerMapId> maps = database->ListBodyMarkerMapIds(session);
+  const std::vector<ReconstructionId> reconstructions = database->ListReconstructionIds(session);
+  if (maps.empty() || reconstructions.empty()) return std::nullopt;
+  for (auto r = reconstructions.rbegin(); r != reconstructions.rend(); ++r) {
+    const std::vector<AlignmentRecord> alignments = database->ListAlignments(*r);
+    if (!alignments.empty()) return SessionPieces{maps.back(), alignments.back()};
+  }
+  return std::nullopt;
+}
+}  // namespace
+
+TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
+                                  const std::string& patient_external_id) {
+  ARPOS_CHECK(database != nullptr, "tracking needs a session store");
+  std::optional<SessionPieces> pieces;
+  SessionId chosen;
+  if (session) {
+    if (!database->GetSession(*session)) ARPOS_INPUT_ERROR("the store has no session " << session->value());
+    pieces = PiecesOf(database, *session);
+    if (!pieces) {
+      ARPOS_INPUT_ERROR("session " << session->value()
+                                   << " has no body marker map and aligned reconstruction: run `arpos session CASE` first");
+    }
+    chosen = *session;
+  } else {
+    std::vector<SessionRecord> sessions;
+    if (!patient_external_id.empty()) {
+      if (const auto patient = database->FindPatient(patient_external_id)) {
+        for (const auto& plan : database->ListPlans(patient->id)) {
+          for (const auto& s : database->ListSessions(plan.id)) sessions.push_back(s);
+        }
+        std::stable_sort(sessions.begin(), sessions.end(), [](const SessionRecord& a, const SessionRecord& b) {
+          return a.started_unix_ms != b.started_unix_ms ? a.started_unix_ms > b.started_unix_ms
+                                                        : a.id.value() > b.id.value();
+        });
+      }
+    }
+    if (sessions.empty()) sessions = database->ListSessions();
+    for (const auto& s : sessions) {
+      pieces = PiecesOf(database, s.id);
+      if (pieces) {
+        chosen = s.id;
+        break;
+      }
+    }
+    if (!pieces) {
+      ARPOS_INPUT_ERROR("the store has no session with a body marker map and an alignment"
+                        << (sessions.empty() ? " (and no session)" : "") << ": run `arpos session CASE` first");
+    }
+  }
+  TrackingInputs in;
+  in.session_id = chosen;
+  const std::optional<SessionRecord> s = database->GetSession(chosen);
+  ARPOS_CHECK(s.has_value(), "session " << chosen.value() << " vanished");
+  in.plan_id = s->plan_id;
+  const std::optional<PlanRecord> plan = database->GetPlan(s->plan_id);
+  if (!plan) ARPOS_INPUT_ERROR("session " << chosen.value() << ": its plan " << s->plan_id.value() << " is missing");
+  const std::optional<RoomMapId> map_id = database->LatestRoomMap(s->plan_id);
+  if (!map_id) {
+    ARPOS_INPUT_ERROR("plan " << s->plan_id.value() << " has no room map: run `arpos plan CASE --plan "
+                              << s->plan_id.value() << "` first");
+  }
+  const std::optional<RoomMapRecord> map = database->GetRoomMap(*map_id);
+  if (!map) ARPOS_INPUT_ERROR("room map " << map_id->value() << " could not be read");
+  in.room_map_id = *map_id;
+  in.room_map = FromRecord(*map);
+  in.model = FromStoredMesh(plan->reference_model);
+  if (in.model.empty()) ARPOS_INPUT_ERROR("plan " << plan->id.value() << ": the reference model has no faces");
+  in.room_from_model_target = plan->room_from_model_target;
+  in.body_marker_map_id = pieces->marker_map;
+  in.alignment_id = pieces->alignment.id;
+  const std::optional<BodyMarkerMapRecord> markers = database->GetBodyMarkerMap(pieces->marker_map);
+  if (!markers) ARPOS_INPUT_ERROR("body marker map " << pieces->marker_map.value() << " could not be read");
+  in.sticker_size_m = markers->marker_size_m;
+  const Rigid3d model_from_body = pieces->alignment.reconstruction_from_model.Inverse();
+  for (const auto& m : markers->markers) in.model_from_marker[m.marker_id] = model_from_body * m.body_from_marker;
+  if (in.model_from_marker.empty()) {
+    ARPOS_INPUT_ERROR("session " << chosen.value() << ": its body marker map holds no sticker");
+  }
+  return in;
+}
+
+TrackerOptions MakeTrackerOptions(const CaseConfig& config, const TrackingInputs& inputs) {
+  TrackerOptions options;
+  options.camera = MakeCameraLocalizerOptions(config);
+  options.body.detector.dictionary = config.dictionary;
+  options.body.detector.id_ranges = {{config.body_markers.id_min, config.body_markers.id_max}};
+  options.body.detector.intrinsics = config.camera;
+  options.body.detector.edge.response = CameraResponse::Srgb();
+  options.body.marker_size_m = inputs.sticker_size_m;
+  return options;
+}
+
+std::string TrackSequenceResult::Summary() const {
+  std::ostringstream out;
+  out << StringPrintf("tracking %s: %d frames, %d tracked, %d carried, %d lost (%.1f %%); %d in tolerance, %d out",
+                      name.c_str(), frames, tracked, carried, lost, frames ? 100.0 * lost / frames : 0.0,
+                      in_tolerance, out_of_tolerance);
+  if (lost_with_stickers) out << StringPrintf("; %d lost with stickers in view", lost_with_stickers);
+  out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
+  if (frames) out << "\n  last correction: " << DescribeCorrection(last_correction);
+  return out.str();
+}
+
+TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,
+                                  const TrackSequenceOptions& options) {
+  ARPOS_CHECK(database != nullptr, "tracking needs a session store");
+  const std::string tol_problem = options.tolerances.Validate();
+  if (!tol_problem.empty()) ARPOS_INPUT_ERROR("tolerances: " << tol_problem);
+  if (std::abs(inputs.room_map.marker_size_m - config.room_markers.size_m) > 1e-6) {
+    ARPOS_INPUT_ERROR("room map " << inputs.room_map_id.value() << " was built with " << inputs.room_map.marker_size_m
+                                  << " m markers but case.yaml says " << config.room_markers.size_m << " m");
+  }
+  const Sequence sequence = Sequence::OpenEveryColourFrame(options.sequence_dir);
+  TrackSequenceResult result;
+  result.name = options.name.empty() ? std::filesystem::absolute(options.sequence_dir).lexically_normal().filename().string()
+                                     : options.name;
+  const bool write_files = !options.out_dir.empty();
+  if (options.overlay && !write_files) ARPOS_INPUT_ERROR("the overlay needs an output folder (--out)");
+  if (write_files) {
+    std::error_code ec;
+    std::filesystem::create_directories(options.out_dir / (options.overlay ? "overlay" : ""), ec);
+    if (ec) ARPOS_INPUT_ERROR(options.out_dir.string() << ": cannot create the output folder (" << ec.message() << ")");
+  }
+
+  TrackerOptions tracker_options = MakeTrackerOptions(config, inputs);
+  tracker_options.tolerances = options.tolerances;
+  tracker_options.parallel = options.parallel;
+  const RecordingResponse response = EstimateRecordingResponse(sequence, config, inputs.room_map.camera_response);
+  result.response_message = response.message;
+  tracker_options.camera.detector.edge.response = response.response;
+  tracker_options.body.detector.edge.response = response.response;
+  const DepthCorrection depth_correction = inputs.room_map.depth_correction;
+  Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target,
+                  config.camera, tracker_options);
+  std::optional<OverlayRenderer> overlay;
+  if (options.overlay) overlay.emplace(inputs.model, config.camera);
+
+  std::vector<StampedPose> poses, camera_poses;
+  std::ostringstream corrections, timing;
+  corrections << CorrectionsCsvHeader();
+  timing << "timestamp,load_ms,depth_correction_ms,camera_detection_ms,camera_keypoints_ms,camera_matching_ms,"
+            "camera_pnp_ms,camera_refinement_ms,camera_ms,body_detection_ms,body_pose_ms,body_ms,combine_ms,"
+            "total_ms,state\n";
+  std::vector<TrackingFrameRecord> records;
+  std::vector<double> totals;
+  double last_t = -1;
+  for (size_t i = 0; i < sequence.size(); ++i) {
+    const double t = sequence.timestamp_s(i);
+    const auto t_load = Clock::now();
+    std::string note;
+    if (last_t >= 0 && t - last_t > options.max_frame_gap_s) {
+      note = StringPrintf("%.3f s since the previous frame", t - last_t);
+    }
+    last_t = t;
+    RgbdFrame frame;
+    std::string depth_problem;
+    bool readable = true;
+    try {
+      frame = sequence.LoadFrameColourFirst(i, config.camera, &depth_problem);
+    } catch (const InputError& e) {
+      readable = false;
+      note += (note.empty() ? "" : "; ") + std::string(e.what());
+    }
+    const double load_ms = MsSince(t_load);
+    TrackedFrame tracked;
+    double depth_ms = 0;
+    if (readable) {
+      // Frame arrival: from here to the correction is the latency.
+      const auto arrival = Clock::now();
+      if (!frame.depth.empty()) CorrectDepthImage(config.camera, depth_correction, &frame.depth);
+      depth_ms = MsSince(arrival);
+      tracked = tracker.Process(frame);
+      tracked.timings.total_ms = MsSince(arrival);
+      if (!depth_problem.empty()) note += (note.empty() ? "" : "; ") + depth_problem;
+    } else {
+      tracked.index = static_cast<int>(i);
+      tracked.timestamp_s = t;
+      tracked.correction = LostCorrection();
+    }
+    if (!tracked.message.empty()) note += (note.empty() ? "" : "; ") + tracked.message;
+
+    ++result.frames;
+    switch (tracked.state) {
+      case TrackingState::kTracked: ++result.tracked; break;
+      case TrackingState::kCarried: ++result.carried; break;
+      case TrackingState::kLost:
+        ++result.lost;
+        if (!tracked.body.sticker_ids.empty() || !tracked.body.stickers_dropped.empty()) ++result.lost_with_stickers;
+        break;
+    }
+    if (tracked.correction.state == CorrectionState::kIn) ++result.in_tolerance;
+    if (tracked.correction.state == CorrectionState::kOut) ++result.out_of_tolerance;
+    if (tracked.room_from_model) poses.push_back({t, *tracked.room_from_model});
+    if (tracked.room_from_camera) camera_poses.push_back({t, *tracked.room_from_camera});
+    corrections << CorrectionsCsvRow(t, tracked.correction);
+    const TrackingTimings& tm = tracked.timings;
+    timing << StringPrintf("%.6f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%s\n", t, load_ms,
+                           depth_ms, tm.camera.detection_ms, tm.camera.keypoints_ms, tm.camera.matching_ms,
+                           tm.camera.pnp_ms, tm.camera.refinement_ms, tm.camera_ms, tm.body.detection_ms,
+                           tm.body.pose_ms, tm.body_ms, tm.combine_ms, tm.total_ms, TrackingStateName(tracked.state));
+    if (readable) totals.push_back(tm.total_ms);
+
+    TrackingFrameRecord record;
+    record.frame_index = static_cast<std::int64_t>(i);
+    record.timestamp_s = t;
+    record.status = tracked.correction.state == CorrectionState::kIn    ? TrackingFrameStatus::kInTolerance
+                    : tracked.correction.state == CorrectionState::kOut ? TrackingFrameStatus::kOutOfTolerance
+                                                                        : TrackingFrameStatus::kLost;
+    if (record.status != TrackingFrameStatus::kLost) {
+      record.room_from_model = tracked.room_from_model;
+      Correction6Dof c;
+      c.translation_mm = Eigen::Vector3d(tracked.correction.lateral_mm, tracked.correction.longitudinal_mm,
+                                         tracked.correction.vertical_mm);
+      c.rotation_deg = Eigen::Vector3d(tracked.correction.pitch_deg, tracked.correction.roll_deg,
+                                       tracked.correction.yaw_deg);
+      record.correction = c;
+      record.uncertainty_translation_mm = tracked.correction.uncertainty.translation_mm;
+      record.uncertainty_rotation_deg = tracked.correction.uncertainty.rotation_deg;
+    }
+    record.room_from_camera = tracked.room_from_camera;
+    record.source = TrackingStateName(tracked.state);
+    record.total_ms = std::max(0.0, tm.total_ms);
+    record.note = note;
+    records.push_back(std::move(record));
+    result.last_correction = tracked.correction;
+
+    if (overlay && readable) {
+      std::optional<Rigid3d> current, planned;
+      if (tracked.room_from_camera) {
+        const Rigid3d camera_from_room = tracked.room_from_camera->Inverse();
+        planned = camera_from_room * inputs.room_from_model_target;
+        if (tracked.room_from_model) current = camera_from_room * *tracked.room_from_model;
+      } else if (tracked.camera_from_model) {
+        current = tracked.camera_from_model;
+      }
+      const std::string caption = StringPrintf("t %.3f s  frame %zu  %s%s%s", t, i, TrackingStateName(tracked.state),
+                                               tracked.message.empty() ? "" : ": ",
+                                               tracked.message.substr(0, 80).c_str());
+      const cv::Mat image = overlay->Render(frame.color, current, planned, tracked.correction, caption);
+      const std::filesystem::path file = options.out_dir / "overlay" / StringPrintf("%.6f.png", t);
+      if (!cv::imwrite(file.string(), image)) ARPOS_INPUT_ERROR(file.string() << ": could not be written");
+    }
+    if (options.progress) options.progress(i + 1, sequence.size());
+  }
+  if (!totals.empty()) {
+    double sum = 0;
+    for (double v : totals) sum += v;
+    result.mean_total_ms = sum / totals.size();
+    std::vector<double> sorted = totals;
+    std::sort(sorted.begin(), sorted.end());
+    result.p95_total_ms = sorted[std::min(sorted.size() - 1, static_cast<size_t>(0.95 * sorted.size()))];
+    result.max_total_ms = sorted.back();
+  }
+
+  // Files first: a run whose files cannot be written stores nothing.
+  const std::string header = StringPrintf("arpos track %s: session %lld, plan %lld, room map %lld",
+                                          result.name.c_str(), static_cast<long long>(inputs.session_id.value()),
+                                          static_cast<long long>(inputs.plan_id.value()),
+                                          static_cast<long long>(inputs.room_map_id.value()));
+  if (write_files) {
+    WriteTrajectory(options.out_dir / "poses.txt", poses, header + ": room_from_model (reference model -> room)");
+    WriteTrajectory(options.out_dir / "camera_poses.txt", camera_poses,
+                    header + ": room_from_camera (camera -> room)");
+    WriteFileAtomic(options.out_dir / "corrections.csv", corrections.str());
+    WriteFileAtomic(options.out_dir / "timing.csv", timing.str());
+  }
+  result.poses = poses;
+
+  TrackingRunRecord run;
+  run.session_id = inputs.session_id;
+  run.alignment_id = inputs.alignment_id;
+  run.tolerance_translation_mm = options.tolerances.translation_mm;
+  run.tolerance_rotation_deg = options.tolerances.rotation_deg;
+  run.sequence_name = result.name;
+  run.options = StringPrintf(
+      "sequence: %s\nout: %s\noverlay: %s\nparallel: %s\nuncertainty_sigmas: %g\nbody_marker_map: %lld\n"
+      "room_map: %lld\nresponse: %s\n",
+      std::filesystem::absolute(options.sequence_dir).lexically_normal().string().c_str(),
+      std::filesystem::absolute(options.out_dir).lexically_normal().string().c_str(), options.overlay ? "true" : "false",
+      options.parallel ? "true" : "false", tracker_options.uncertainty_sigmas,
+      static_cast<long long>(inputs.body_marker_map_id.value()), static_cast<long long>(inputs.room_map_id.value()),
+      response.message.c_str());
+  run.summary = result.Summary();
+  database->WithTransaction([&] {
+    if (options.recording_id) {
+      result.recording_id = *options.recording_id;
+    } else {
+      RecordingRecord rec;
+      rec.kind = RecordingKind::kTracking;
+      rec.session_id = inputs.session_id;
+      rec.name = result.name;
+      rec.path = std::filesystem::absolute(options.sequence_dir).lexically_normal().string();
+      rec.frame_count = static_cast<std::int64_t>(sequence.size());
+      rec.intrinsics = ToRecordingIntrinsics(config.camera);
+      result.recording_id = database->AddRecording(rec);
+    }
+    run.recording_id = result.recording_id;
+    result.run_id = database->AddTrackingRun(run);
+    database->AppendTrackingFrames(result.run_id, records);
+    database->AppendAudit({AuditId(), 0, options.actor, "track",
+                           "tracking_run:" + std::to_string(result.run_id.value()), result.Summary()});
+  });
+  return result;
+}
+
+}  // namespace arpos

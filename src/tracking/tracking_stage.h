@@ -1,0 +1,106 @@
+#pragma once
+/// The tracking stage with the session store: what a tracking run needs (the
+/// plan's room map, reference model and planned pose; the session's stickers
+/// on the model), one recorded sequence tracked frame by frame, the files of
+/// DATASET.md "Outputs of tracking", and the run with every frame in the
+/// store. Used by `arpos track`, `arpos run-case` and the GUI.
+///
+/// A run writes its files first and then stores the run and its frames in
+/// one transaction: a run whose files cannot be written stores nothing.
+/// Frames that cannot be used (no or corrupt colour, missing depth, a gap in
+/// the timestamps, no body in view) each get a stated state and the run goes
+/// on.
+
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "feedback/couch_correction.h"
+#include "geometry/rigid3.h"
+#include "geometry/triangle_mesh.h"
+#include "room_map/room_map.h"
+#include "sensor/case_config.h"
+#include "sensor/tum_io.h"
+#include "store/records.h"
+#include "tracking/tracker.h"
+
+namespace arpos {
+
+class Database;
+
+/// Everything a tracking run reads from the store.
+struct TrackingInputs {
+  SessionId session_id;
+  PlanId plan_id;
+  RoomMapId room_map_id;
+  BodyMarkerMapId body_marker_map_id;
+  AlignmentId alignment_id;
+  RoomMap room_map;
+  TriangleMesh model;
+  Rigid3d room_from_model_target;
+  /// The session's stickers in the model frame:
+  /// reconstruction_from_model^-1 * body_from_marker.
+  std::map<int, Rigid3d> model_from_marker;
+  double sticker_size_m = 0;
+};
+
+/// The inputs of `session` if given, else of the newest session (with a
+/// body marker map and an alignment) of the patient `patient_external_id`,
+/// else the newest such session in the store. Throws InputError saying what
+/// is missing and which command makes it.
+TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
+                                  const std::string& patient_external_id);
+
+struct TrackSequenceOptions {
+  std::filesystem::path sequence_dir;
+  /// The run's name (the tracking/<name> folder name); empty: the folder's name.
+  std::string name;
+  /// Output folder: poses.txt, camera_poses.txt, corrections.csv, timing.csv
+  /// and, with `overlay`, overlay/<timestamp>.png. Created if missing. Empty:
+  /// no files (the run is stored all the same).
+  std::filesystem::path out_dir;
+  bool overlay = false;
+  CouchTolerances tolerances;
+  std::string actor = "arpos track";
+  /// The tracking recording already stored for this sequence (run-case
+  /// registers them); otherwise one is added with the run.
+  std::optional<RecordingId> recording_id;
+  /// Frames further apart than this are a gap: said in the frame's note.
+  double max_frame_gap_s = 0.25;
+  /// Tracking on two threads (scene and body); false for one.
+  bool parallel = true;
+  /// Progress: frame index and count, after each frame.
+  std::function<void(size_t, size_t)> progress;
+};
+
+struct TrackSequenceResult {
+  TrackingRunId run_id;
+  RecordingId recording_id;
+  std::string name;
+  int frames = 0, tracked = 0, carried = 0, lost = 0;
+  int in_tolerance = 0, out_of_tolerance = 0;
+  /// Frames lost while at least one mapped sticker was detected.
+  int lost_with_stickers = 0;
+  double mean_total_ms = 0, p95_total_ms = 0, max_total_ms = 0;
+  std::string response_message;  ///< the recording's camera response
+  /// The last frame's correction (what the therapist last saw).
+  CouchCorrection last_correction;
+  /// room_from_model of every frame with a pose (poses.txt).
+  std::vector<StampedPose> poses;
+  std::string Summary() const;
+};
+
+/// Tracks `options.sequence_dir` (a TUM-layout sequence with the case's
+/// camera `config`) against `inputs`, writes the files, stores the run.
+/// Throws InputError for an unreadable sequence or an unwritable out_dir
+/// (before any work), StoreError when the store fails (files written).
+TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,
+                                  const TrackSequenceOptions& options);
+
+/// The tracker options for a case (dictionaries and id ranges from case.yaml).
+TrackerOptions MakeTrackerOptions(const CaseConfig& config, const TrackingInputs& inputs);
+
+}  // namespace arpos
