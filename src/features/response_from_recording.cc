@@ -100,7 +100,15 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
   const size_t count = std::min<size_t>(n, options.max_frames);
   for (size_t s = 0; s < count; ++s) {
     const size_t i = count > 1 ? s * (n - 1) / (count - 1) : 0;
-    const RgbdFrame frame = sequence.LoadFrame(i, intrinsics);
+    // Only the colour is read; a frame that cannot be read (tracking goes on
+    // past it and says so) is skipped here.
+    RgbdFrame frame;
+    std::string depth_problem;
+    try {
+      frame = sequence.LoadFrameColourFirst(i, intrinsics, &depth_problem);
+    } catch (const InputError&) {
+      continue;
+    }
     ResponseFrame f;
     if (frame.color.channels() == 3) {
       cv::cvtColor(frame.color, f.gray, cv::COLOR_BGR2GRAY);

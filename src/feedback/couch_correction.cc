@@ -81,11 +81,19 @@ std::string CorrectionsCsvHeader() {
          "state\n";
 }
 
+namespace {
+// A value as printed with `decimals`, without "-0.000" for what rounds to zero.
+double Printable(double value, int decimals) {
+  return std::abs(value) < 0.5 * std::pow(10.0, -decimals) ? 0.0 : value;
+}
+}  // namespace
+
 std::string CorrectionsCsvRow(double timestamp_s, const CouchCorrection& c) {
   if (c.state == CorrectionState::kLost) return StringPrintf("%.6f,,,,,,,,,lost\n", timestamp_s);
-  return StringPrintf("%.6f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%s\n", timestamp_s, c.lateral_mm,
-                      c.longitudinal_mm, c.vertical_mm, c.pitch_deg, c.roll_deg, c.yaw_deg, c.translation_mm,
-                      c.rotation_deg, CorrectionStateName(c.state));
+  return StringPrintf("%.6f,%.3f,%.3f,%.3f,%.4f,%.4f,%.4f,%.3f,%.4f,%s\n", timestamp_s, Printable(c.lateral_mm, 3),
+                      Printable(c.longitudinal_mm, 3), Printable(c.vertical_mm, 3), Printable(c.pitch_deg, 4),
+                      Printable(c.roll_deg, 4), Printable(c.yaw_deg, 4), Printable(c.translation_mm, 3),
+                      Printable(c.rotation_deg, 4), CorrectionStateName(c.state));
 }
 
 std::string DescribeCorrection(const CouchCorrection& c) {

@@ -37,6 +37,10 @@ std::string BodyTrackerOptions::Validate() const {
   if (!(sticker_window_margin_px >= 0)) return "sticker_window_margin_px must not be negative";
   if (!(detection_side_px >= 8)) return "detection_side_px must be at least 8";
   if (!(min_sticker_side_px >= 3)) return "min_sticker_side_px must be at least 3";
+  if (!(start_depth_weight_px >= 0)) return "start_depth_weight_px must not be negative";
+  if (!(max_refinement_shift_px > 0) || !(max_refinement_shift_fraction >= 0)) {
+    return "max_refinement_shift_px must be positive and max_refinement_shift_fraction not negative";
+  }
   if (max_frames_without_stickers < 0) return "max_frames_without_stickers must not be negative";
   if (!(min_depth_inlier_fraction >= 0 && min_depth_inlier_fraction <= 1)) {
     return "min_depth_inlier_fraction must be in [0, 1]";
@@ -90,6 +94,7 @@ struct BodyTracker::Impl {
   bool distorted = false;
   cv::Mat rays;  // CV_32FC2: normalised ideal coordinates of every pixel (distorted cameras)
   std::vector<Eigen::Vector3d> model_points, model_normals;
+  std::vector<Eigen::Vector3d> coarse_points, coarse_normals;  // ~2 cm apart, for start poses
   std::map<int, Rigid3d> model_from_marker;
   std::array<Eigen::Vector3d, 4> corners_in_marker;
   std::unique_ptr<MarkerDetector> detector;  // whole image, edge-line corners
@@ -164,6 +169,8 @@ struct BodyTracker::Impl {
         crop.copyTo(window_up);
       }
       coarse->Detect(window_up, &scratch);
+      ARPOS_DEBUG("sticker " << id << ": side " << side << " px, window " << (x1 - x0) << "x" << (y1 - y0) << " x" << k
+                             << ", " << scratch.size() << " detections");
       for (const MarkerObservation& obs : scratch) {
         if (obs.id != id) continue;
         std::array<Eigen::Vector2d, 4> initial;
@@ -173,6 +180,8 @@ struct BodyTracker::Impl {
                        Eigen::Vector2d(x0, y0);
         }
         const CornerRefinementResult r = RefineMarkerCorners(gray, initial, edge, undistorter, &workspace);
+        ARPOS_DEBUG("sticker " << id << ": side " << side << " px, x" << k << ", refinement "
+                               << MarkerStatusName(r.status) << " " << r.failure);
         MarkerObservation out = obs;
         out.detected_corners_px = initial;
         out.status = r.status;
@@ -188,6 +197,72 @@ struct BodyTracker::Impl {
         break;
       }
     }
+  }
+
+  // Mapped stickers not in `have` that the pose puts in view, refined
+  // (edge lines) at their projected corners; kept when the fit converged
+  // close to the projection.
+  void RefineAtPose(const Rigid3d& camera_from_model, const std::vector<int>& have, const BodyTrackerOptions& o,
+                    std::vector<MarkerObservation>* found) {
+    found->clear();
+    for (const auto& [id, model_from_sticker] : model_from_marker) {
+      if (std::find(have.begin(), have.end(), id) != have.end()) continue;
+      const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
+      const Eigen::Vector3d centre = camera_from_sticker.translation;
+      const Eigen::Vector3d normal = camera_from_sticker.rotation * Eigen::Vector3d::UnitZ();
+      if (centre.z() < 0.1 || normal.dot(centre) > -0.3 * centre.norm()) continue;
+      std::array<Eigen::Vector2d, 4> px;
+      double perimeter = 0;
+      bool inside = true;
+      for (int c = 0; c < 4; ++c) {
+        px[c] = PixelOf(camera_from_sticker * corners_in_marker[c]);
+        inside &= px[c].x() > 3 && px[c].y() > 3 && px[c].x() < K.width - 4 && px[c].y() < K.height - 4;
+      }
+      if (!inside) continue;
+      for (int c = 0; c < 4; ++c) perimeter += (px[(c + 1) % 4] - px[c]).norm();
+      const double side = perimeter / 4;
+      if (side < o.min_sticker_side_px) continue;
+      const CornerRefinementResult r = RefineMarkerCorners(gray, px, edge, undistorter, &workspace);
+      if (r.status != MarkerStatus::kRefined) continue;
+      double shift = 0;
+      for (int c = 0; c < 4; ++c) shift = std::max(shift, (r.corners_px[c] - px[c]).norm());
+      if (shift > std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * side)) continue;
+      MarkerObservation out;
+      out.id = id;
+      out.detected_corners_px = px;
+      out.status = r.status;
+      out.corners_px = r.corners_px;
+      out.corner_sigma_px = r.corner_sigma_px;
+      out.edge_fit_rms_px = r.edge_fit_rms_px;
+      out.max_segment_offset_px = r.max_segment_offset_px;
+      out.edge_inlier_fraction = r.edge_inlier_fraction;
+      out.contrast_grey = r.contrast_grey;
+      out.blur_sigma_px = r.blur_sigma_px;
+      out.noise_sigma_grey = r.noise_sigma_grey;
+      found->push_back(out);
+    }
+  }
+
+  // Share of the coarse model points facing the camera (in the image, with a
+  // depth reading) whose depth reading lies within `gate` of them: a cheap
+  // test of a candidate pose against the surface.
+  double DepthAgreement(const Rigid3d& camera_from_model, const RgbdFrame& frame, double gate) const {
+    const Eigen::Matrix3d R = camera_from_model.RotationMatrix();
+    int seen = 0, agree = 0;
+    for (size_t i = 0; i < coarse_points.size(); ++i) {
+      const Eigen::Vector3d p = R * coarse_points[i] + camera_from_model.translation;
+      if (p.z() < 0.1 || (R * coarse_normals[i]).dot(p) > -0.1 * p.norm()) continue;
+      const Eigen::Vector2d px = PixelOf(p);
+      const int u = static_cast<int>(std::lround(px.x())), v = static_cast<int>(std::lround(px.y()));
+      if (u < 0 || v < 0 || u >= K.width || v >= K.height) continue;
+      const uint16_t raw = frame.depth.at<uint16_t>(v, u);
+      if (raw == 0) continue;
+      ++seen;
+      // Along the ray: the reading may lie behind (hidden) or in front
+      // (something over the patient) of a point the camera cannot see.
+      agree += std::abs(raw / frame.depth_scale - p.z()) < gate;
+    }
+    return seen ? static_cast<double>(agree) / seen : 0.0;
   }
 
   // Model points facing the camera and in front in a coarse z-buffer.
@@ -265,6 +340,11 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
     m.model_points.push_back(surface.point3(i));
     m.model_normals.push_back(surface.normal3(i));
   }
+  const PointCloud coarse_surface = SampleMeshSurface(model, 0.02);
+  for (size_t i = 0; i < coarse_surface.size(); ++i) {
+    m.coarse_points.push_back(coarse_surface.point3(i));
+    m.coarse_normals.push_back(coarse_surface.normal3(i));
+  }
   m.model_from_marker = std::move(model_from_marker);
   m.corners_in_marker = MarkerCornersInMarker(options_.marker_size_m);
   MarkerDetectorOptions detector = options_.detector;
@@ -336,10 +416,10 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
     m.detector->Detect(m.gray, &m.scratch);
     found = m.scratch;
   }
-  std::vector<SeenSticker> stickers;
-  {
+  auto make_stickers = [&](const std::vector<MarkerObservation>& observations) {
+    std::vector<SeenSticker> out;
     std::vector<cv::Point2d> raw;
-    for (const auto& obs : found) {
+    for (const auto& obs : observations) {
       const auto it = m.model_from_marker.find(obs.id);
       if (it == m.model_from_marker.end()) continue;
       if (obs.status != MarkerStatus::kRefined && obs.status != MarkerStatus::kPartiallyOccluded) continue;
@@ -354,7 +434,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
       }
       s.single_view = EstimateMarkerPose(obs, o.marker_size_m, m.K, have_depth ? frame.depth : cv::Mat(),
                                          o.marker_pose);
-      stickers.push_back(s);
+      out.push_back(s);
     }
     if (!raw.empty()) {
       std::vector<cv::Point2d> normalised;
@@ -363,18 +443,12 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
       } else {
         for (const auto& p : raw) normalised.emplace_back((p.x - m.K.cx) / m.K.fx, (p.y - m.K.cy) / m.K.fy);
       }
-      for (size_t s = 0; s < stickers.size(); ++s) {
-        for (int c = 0; c < 4; ++c) {
-          stickers[s].normalised[c] = Eigen::Vector2d(normalised[4 * s + c].x, normalised[4 * s + c].y);
-        }
+      for (size_t i = 0; i < out.size(); ++i) {
+        for (int c = 0; c < 4; ++c) out[i].normalised[c] = Eigen::Vector2d(normalised[4 * i + c].x, normalised[4 * i + c].y);
       }
     }
-  }
-  result.timings.detection_ms = MsSince(t_detect);
-  ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
-                            << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
-  const auto t_pose = Clock::now();
-
+    return out;
+  };
   auto sticker_rms = [&](const Rigid3d& camera_from_model, const SeenSticker& s) {
     double sum = 0;
     for (int c = 0; c < 4; ++c) {
@@ -386,33 +460,53 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
     }
     return std::sqrt(sum / 4);
   };
-
-  // 3. Start pose: the candidate that explains every sticker best.
-  std::optional<Rigid3d> start_pose;
-  if (!stickers.empty()) {
+  // 3. Start pose: the candidate (the prediction, each sticker's IPPE
+  // solutions) that explains every sticker and the depth best. One small
+  // sticker's two solutions explain its corners alike; the surface tells.
+  auto choose_start = [&](const std::vector<SeenSticker>& seen) -> std::optional<Rigid3d> {
     std::vector<Rigid3d> candidates;
     if (predicted) candidates.push_back(*predicted);
-    // Ties (one sticker's two IPPE solutions explain it alike) go to the
-    // earlier candidate: the prediction, then the depth-chosen poses.
-    for (const auto& s : stickers) {
+    for (const auto& s : seen) {
       if (s.single_view.status == MarkerPoseStatus::kOk) {
         candidates.push_back(s.single_view.camera_from_marker * s.marker_from_model);
       }
-    }
-    for (const auto& s : stickers) {
       for (int k = 0; k < s.single_view.num_solutions; ++k) {
         candidates.push_back(s.single_view.solutions[k].camera_from_marker * s.marker_from_model);
       }
     }
+    std::optional<Rigid3d> best_pose;
     double best = std::numeric_limits<double>::infinity();
     for (const auto& c : candidates) {
       double cost = 0;
-      for (const auto& s : stickers) cost += std::min(sticker_rms(c, s), 30.0);
-      if (cost < best - 1e-9) best = cost, start_pose = c;
+      for (const auto& s : seen) cost += std::min(sticker_rms(c, s), 30.0);
+      if (have_depth) cost += o.start_depth_weight_px * (1.0 - m.DepthAgreement(c, frame, o.depth_gate_initial_m));
+      if (cost < best - 1e-9) best = cost, best_pose = c;
     }
-  } else if (predicted && m.frames_without_stickers < o.max_frames_without_stickers && have_depth) {
+    return best_pose;
+  };
+
+  std::vector<SeenSticker> stickers = make_stickers(found);
+  std::optional<Rigid3d> start_pose;
+  if (!stickers.empty()) {
+    start_pose = choose_start(stickers);
+    // Found in the whole image (small stickers are often missed there):
+    // search again around where the first pose puts every sticker.
+    if (start_pose && (!predicted || from_hint)) {
+      std::vector<MarkerObservation> around;
+      m.SearchAround(*start_pose, o, &around);
+      std::vector<SeenSticker> more = make_stickers(around);
+      if (more.size() > stickers.size()) {
+        stickers = std::move(more);
+        start_pose = choose_start(stickers);
+      }
+    }
+  } else if (predicted && !from_hint && m.frames_without_stickers < o.max_frames_without_stickers && have_depth) {
     start_pose = predicted;
   }
+  result.timings.detection_ms = MsSince(t_detect);
+  const auto t_pose = Clock::now();
+  ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
+                            << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
   if (!start_pose) {
     result.message = stickers.empty() ? "no sticker in view" : "no sticker pose";
     result.timings.pose_ms = MsSince(t_pose);
@@ -420,15 +514,18 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   }
 
   // 4. Joint refinement of corners and depth; disagreeing stickers dropped.
-  const bool carried = stickers.empty();
-  std::vector<char> use(stickers.size(), 1);
+  bool carried = stickers.empty();
+  std::vector<char> use;
   Rigid3d pose = *start_pose;
   Matrix6d H_final = Matrix6d::Zero();
   double chi2 = 0;
   int dof = 0, depth_inliers = 0, depth_candidates = 0;
   double depth_sq = 0;
+  auto fit = [&](const Rigid3d& from) {
+  use.assign(stickers.size(), 1);
+  result.stickers_dropped.clear();
   for (int round = 0; round < 4; ++round) {
-    pose = *start_pose;
+    pose = from;
     for (int it = 0; it < o.max_iterations; ++it) {
       Matrix6d H = Matrix6d::Zero();
       Vector6d g = Vector6d::Zero();
@@ -536,6 +633,26 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
     use[worst] = 0;
     result.stickers_dropped.push_back(stickers[worst].id);
     if (std::count(use.begin(), use.end(), 1) == 0) break;
+  }
+  };
+  fit(*start_pose);
+  // 5. Stickers too small or blurred for ArUco to read are refined where
+  // the fitted pose puts them (their identity is the prediction's), then
+  // the fit is repeated with them; one that disagrees is dropped as above.
+  {
+    std::vector<int> have;
+    for (size_t si = 0; si < stickers.size(); ++si) {
+      if (use[si]) have.push_back(stickers[si].id);
+    }
+    std::vector<MarkerObservation> at_pose;
+    m.RefineAtPose(pose, have, o, &at_pose);
+    std::vector<SeenSticker> extra = make_stickers(at_pose);
+    if (!extra.empty()) {
+      result.stickers_refined_at_pose = static_cast<int>(extra.size());
+      stickers.insert(stickers.end(), extra.begin(), extra.end());
+      carried = false;
+      fit(pose);
+    }
   }
   double rms_sum = 0;
   for (size_t si = 0; si < stickers.size(); ++si) {

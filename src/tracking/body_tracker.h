@@ -78,6 +78,15 @@ struct BodyTrackerOptions {
   /// Huber threshold on normalised residuals (sigmas), corners and depth.
   double huber_sigmas = 2.5;
   int max_iterations = 10;
+  /// Start pose: a candidate's cost is its stickers' corner RMS (px, each
+  /// capped at 30) plus this many px times the share of the model's surface
+  /// that disagrees with the depth.
+  double start_depth_weight_px = 10;
+  /// After the first fit, each mapped sticker ArUco did not read is refined
+  /// at its projected corners; kept when its corners moved at most
+  /// max(px, fraction * side) from the projection.
+  double max_refinement_shift_px = 1.5;
+  double max_refinement_shift_fraction = 0.12;
 
   /// A sticker whose corner RMS exceeds this after the fit is dropped.
   double max_sticker_rms_px = 1.2;
@@ -110,7 +119,7 @@ enum class BodyPoseSource {
 const char* BodyPoseSourceName(BodyPoseSource source);
 
 struct BodyTrackingTimings {
-  double detection_ms = 0;  ///< sticker detection and corner refinement
+  double detection_ms = 0;  ///< sticker search, corner refinement, start pose
   double pose_ms = 0;       ///< start pose, refinement with depth, checks
   double total_ms = 0;
 };
@@ -121,6 +130,7 @@ struct BodyPoseResult {
   BodyPoseSource source = BodyPoseSource::kLost;
   std::vector<int> sticker_ids;     ///< stickers used
   std::vector<int> stickers_dropped;  ///< seen but disagreeing
+  int stickers_refined_at_pose = 0;  ///< of sticker_ids, found by refinement at the fitted pose
   double sticker_rms_px = 0;
   int depth_inliers = 0;
   double depth_rms_mm = 0;

@@ -1,0 +1,105 @@
+// The couch correction's axes, signs and verdict against known offsets
+// (DATASET.md "Corrections").
+#include "feedback/couch_correction.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+namespace arpos {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+Rigid3d Turn(const Eigen::Vector3d& axis, double deg) {
+  return Rigid3d::FromRotationVector(axis.normalized() * deg * kPi / 180, Eigen::Vector3d::Zero());
+}
+// A planned pose whose model axes are not the room's (supine patient: the
+// model's y axis, posterior, points down in the room).
+Rigid3d Target() {
+  return Rigid3d(Turn(Eigen::Vector3d::UnitX(), -90).rotation * Turn(Eigen::Vector3d(0.1, 0.2, 1), 7).rotation,
+                 Eigen::Vector3d(0.8, 1.3, 0.95));
+}
+// The patient displaced from the target by `shift` (model axes of the
+// target, metres) and turned by `turn` about the isocentre (model axes).
+Rigid3d Displaced(const Eigen::Vector3d& shift_model, const Rigid3d& turn_model = Rigid3d()) {
+  const Rigid3d target = Target();
+  return Rigid3d(target.rotation * turn_model.rotation, target.translation + target.rotation * shift_model);
+}
+
+TEST(CouchCorrection, TranslationsAlongEachCouchAxis) {
+  const CouchTolerances tol;
+  // Patient 10 mm to their left (+x model): the couch moves them 10 mm to the right.
+  CouchCorrection c = ComputeCouchCorrection(Displaced({0.010, 0, 0}), Target(), {}, tol);
+  EXPECT_NEAR(c.lateral_mm, -10, 1e-9);
+  EXPECT_NEAR(c.longitudinal_mm, 0, 1e-9);
+  EXPECT_NEAR(c.vertical_mm, 0, 1e-9);
+  // 5 mm too far superior (+z model, towards the gantry): longitudinal -5.
+  c = ComputeCouchCorrection(Displaced({0, 0, 0.005}), Target(), {}, tol);
+  EXPECT_NEAR(c.longitudinal_mm, -5, 1e-9);
+  EXPECT_NEAR(c.lateral_mm, 0, 1e-9);
+  // 3 mm too posterior (+y model = down): the couch moves up 3 mm (vertical +3).
+  c = ComputeCouchCorrection(Displaced({0, 0.003, 0}), Target(), {}, tol);
+  EXPECT_NEAR(c.vertical_mm, 3, 1e-9);
+  EXPECT_NEAR(c.translation_mm, 3, 1e-9);
+  EXPECT_NEAR(c.rotation_deg, 0, 1e-9);
+}
+
+TEST(CouchCorrection, RotationsAboutEachCouchAxis) {
+  const CouchTolerances tol;
+  // Turned +0.5 deg about the lateral axis: pitch -0.5 undoes it.
+  CouchCorrection c = ComputeCouchCorrection(Displaced({0, 0, 0}, Turn(Eigen::Vector3d::UnitX(), 0.5)), Target(), {}, tol);
+  EXPECT_NEAR(c.pitch_deg, -0.5, 1e-9);
+  EXPECT_NEAR(c.roll_deg, 0, 1e-9);
+  EXPECT_NEAR(c.yaw_deg, 0, 1e-9);
+  EXPECT_NEAR(c.translation_mm, 0, 1e-9);  // about the isocentre: no shift
+  // +0.7 deg about the longitudinal axis (+z): roll -0.7.
+  c = ComputeCouchCorrection(Displaced({0, 0, 0}, Turn(Eigen::Vector3d::UnitZ(), 0.7)), Target(), {}, tol);
+  EXPECT_NEAR(c.roll_deg, -0.7, 1e-9);
+  // +0.3 deg about the vertical axis (up = -y): yaw -0.3.
+  c = ComputeCouchCorrection(Displaced({0, 0, 0}, Turn(-Eigen::Vector3d::UnitY(), 0.3)), Target(), {}, tol);
+  EXPECT_NEAR(c.yaw_deg, -0.3, 1e-9);
+  EXPECT_NEAR(c.rotation_deg, 0.3, 1e-9);
+}
+
+TEST(CouchCorrection, ApplyingTheCorrectionReachesThePlannedPose) {
+  const Rigid3d current =
+      Displaced({0.004, -0.012, 0.021}, Turn(Eigen::Vector3d(0.3, -1, 0.4), 1.7));
+  const CouchCorrection c = ComputeCouchCorrection(current, Target(), {}, {});
+  const Rigid3d after = ApplyCouchCorrection(current, c, Target());
+  EXPECT_TRUE(after.IsApprox(Target(), 1e-9, 1e-9)) << after.ToString() << " vs " << Target().ToString();
+  EXPECT_NEAR(c.translation_mm, std::sqrt(4.0 * 4 + 12 * 12 + 21 * 21), 1e-9);
+  EXPECT_NEAR(c.rotation_deg, 1.7, 1e-9);
+}
+
+TEST(CouchCorrection, InOnlyWhenTheCorrectionPlusItsUncertaintyIsWithinTolerance) {
+  CouchTolerances tol;
+  tol.translation_mm = 2;
+  tol.rotation_deg = 1;
+  const Rigid3d current = Displaced({0.0015, 0, 0}, Turn(Eigen::Vector3d::UnitZ(), 0.5));
+  EXPECT_EQ(ComputeCouchCorrection(current, Target(), {0.4, 0.4}, tol).state, CorrectionState::kIn);
+  // 1.5 mm + 0.6 mm > 2 mm: out, though the correction alone is within.
+  EXPECT_EQ(ComputeCouchCorrection(current, Target(), {0.6, 0.1}, tol).state, CorrectionState::kOut);
+  // 0.5 deg + 0.6 deg > 1 deg: out.
+  EXPECT_EQ(ComputeCouchCorrection(current, Target(), {0.1, 0.6}, tol).state, CorrectionState::kOut);
+  // Truly out never reads in, whatever the uncertainty.
+  EXPECT_EQ(ComputeCouchCorrection(Displaced({0.0025, 0, 0}), Target(), {0, 0}, tol).state, CorrectionState::kOut);
+  EXPECT_EQ(LostCorrection().state, CorrectionState::kLost);
+}
+
+TEST(CouchCorrection, CsvRowsFollowTheHeader) {
+  EXPECT_EQ(CorrectionsCsvHeader(),
+            "timestamp,lateral_mm,longitudinal_mm,vertical_mm,pitch_deg,roll_deg,yaw_deg,translation_mm,rotation_deg,"
+            "state\n");
+  const CouchCorrection c = ComputeCouchCorrection(Displaced({0.010, 0, 0}), Target(), {}, {});
+  EXPECT_EQ(CorrectionsCsvRow(12.5, c), "12.500000,-10.000,0.000,0.000,0.0000,0.0000,0.0000,10.000,0.0000,out\n");
+  EXPECT_EQ(CorrectionsCsvRow(13, LostCorrection()), "13.000000,,,,,,,,,lost\n");
+  CouchTolerances bad;
+  bad.translation_mm = 0;
+  EXPECT_FALSE(bad.Validate().empty());
+  bad.translation_mm = 2;
+  bad.rotation_deg = std::nan("");
+  EXPECT_FALSE(bad.Validate().empty());
+}
+
+}  // namespace
+}  // namespace arpos

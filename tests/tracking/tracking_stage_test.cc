@@ -1,0 +1,207 @@
+// Tracking mode on the bundled sample: a sequence made of the sample's
+// tracking frames with stickers painted out, an unreadable colour image, a
+// frame without depth, a timestamp gap and a frame with nothing in view.
+// Each gives its stated state, the run goes on, tracking recovers, and what
+// is stored agrees with the files.
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "cli/cli_util.h"
+#include "eval/trajectory_eval.h"
+#include "features/marker_pose.h"
+#include "geometry/pose_error.h"
+#include "sensor/case_config.h"
+#include "sensor/sequence.h"
+#include "sensor/tum_io.h"
+#include "store/sqlite_database.h"
+#include "tracking/tracking_stage.h"
+
+namespace arpos {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Frame {
+  std::string kind;  // normal, no_stickers, corrupt, no_depth, gap, empty
+};
+
+class TrackingStage : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = fs::temp_directory_path() / ("arpos_tracking_stage_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    case_ = root_ / "case";
+    fs::copy(fs::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion", case_, fs::copy_options::recursive);
+    store_ = root_ / "store.db";
+    const auto plan = testing::RunArpos("plan " + case_.string() + " --store " + store_.string());
+    ASSERT_EQ(plan.status, 0) << plan.output;
+    const auto session = testing::RunArpos("session " + case_.string() + " --store " + store_.string());
+    ASSERT_EQ(session.status, 0) << session.output;
+  }
+  static void TearDownTestSuite() { fs::remove_all(root_); }
+
+  // A sequence of the sample's first tracking frame in the given kinds, 1/30 s
+  // apart (a gap frame comes 2 s after the previous one).
+  static fs::path MakeSequence(const std::string& name, const std::vector<std::string>& kinds,
+                               std::vector<double>* stamps) {
+    const fs::path src = case_ / "tracking" / "seq_00";
+    const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+    const Sequence sample = Sequence::Open(src);
+    const RgbdFrame a = sample.LoadFrame(0, config.camera);
+    // Every sticker painted over with the skin around it, where the true
+    // poses put it.
+    cv::Mat no_stickers = a.color.clone();
+    auto database = SqliteDatabase::Open(store_.string());
+    const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+    const Rigid3d camera_from_model =
+        sample.CameraGroundTruth()->front().room_from_x.Inverse() * sample.BodyGroundTruth()->front().room_from_x;
+    int painted = 0;
+    for (const auto& [id, model_from_sticker] : inputs.model_from_marker) {
+      const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
+      if ((camera_from_sticker.rotation * Eigen::Vector3d::UnitZ()).dot(camera_from_sticker.translation) > 0) continue;
+      std::vector<Eigen::Vector2d> corners;
+      Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+      for (const auto& c : MarkerCornersInMarker(inputs.sticker_size_m)) {
+        corners.push_back(config.camera.Project(camera_from_sticker * c));
+        centre += corners.back() / 4;
+      }
+      std::vector<cv::Point> poly;
+      for (const auto& c : corners) {
+        const Eigen::Vector2d p = centre + 1.8 * (c - centre);
+        poly.emplace_back(static_cast<int>(std::lround(p.x())), static_cast<int>(std::lround(p.y())));
+      }
+      const Eigen::Vector2d q = centre + 2.5 * (corners[0] - centre);
+      const cv::Vec3b skin = a.color.at<cv::Vec3b>(std::clamp(static_cast<int>(q.y()), 0, a.color.rows - 1),
+                                                   std::clamp(static_cast<int>(q.x()), 0, a.color.cols - 1));
+      cv::fillConvexPoly(no_stickers, poly, cv::Scalar(skin[0], skin[1], skin[2]));
+      ++painted;
+    }
+    EXPECT_GE(painted, 2) << "the sample's first tracking frame should show stickers";
+    const fs::path dir = case_ / "tracking" / name;
+    fs::create_directories(dir / "rgb");
+    fs::create_directories(dir / "depth");
+    std::ofstream rgb(dir / "rgb.txt"), depth(dir / "depth.txt");
+    double t = 100.0;
+    for (size_t i = 0; i < kinds.size(); ++i) {
+      t += kinds[i] == "gap" ? 2.0 : 1.0 / 30;
+      stamps->push_back(t);
+      char stamp[32];
+      std::snprintf(stamp, sizeof(stamp), "%.6f", t);
+      const std::string colour_name = std::string("rgb/") + stamp + ".png";
+      const std::string depth_name = std::string("depth/") + stamp + ".png";
+      rgb << stamp << " " << colour_name << "\n";
+      if (kinds[i] != "no_depth") depth << stamp << " " << depth_name << "\n";
+      cv::Mat colour = a.color, d = a.depth;
+      if (kinds[i] == "no_stickers") colour = no_stickers;
+      if (kinds[i] == "empty") {
+        colour = cv::Mat(a.color.size(), CV_8UC3, cv::Scalar(128, 128, 128));
+        d = cv::Mat::zeros(a.depth.size(), CV_16UC1);
+      }
+      if (kinds[i] == "corrupt") {
+        std::ofstream(dir / colour_name) << "not a png";
+      } else {
+        cv::imwrite((dir / colour_name).string(), colour);
+      }
+      cv::imwrite((dir / depth_name).string(), d);
+    }
+    return dir;
+  }
+
+  static fs::path root_, case_, store_;
+};
+fs::path TrackingStage::root_, TrackingStage::case_, TrackingStage::store_;
+
+TEST_F(TrackingStage, BadFramesAreStatedAndTrackingRecovers) {
+  const std::vector<std::string> kinds = {"normal",      "normal",      "no_stickers", "no_stickers",
+                                          "no_stickers", "no_stickers", "no_stickers", "no_stickers",
+                                          "no_stickers", "normal",      "corrupt",     "no_depth",
+                                          "gap",         "empty",       "normal"};
+  std::vector<double> stamps;
+  const fs::path seq = MakeSequence("bad_frames", kinds, &stamps);
+  auto database = SqliteDatabase::Open(store_.string());
+  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+  TrackSequenceOptions options;
+  options.sequence_dir = seq;
+  options.out_dir = root_ / "out_bad_frames";
+  const TrackSequenceResult result = TrackSequence(database.get(), inputs, config, options);
+  ASSERT_EQ(result.frames, static_cast<int>(kinds.size()));
+
+  const std::vector<TrackingFrameRecord> frames = database->GetTrackingFrames(result.run_id);
+  ASSERT_EQ(frames.size(), kinds.size());
+  std::vector<std::string> sources;
+  for (const auto& f : frames) sources.push_back(f.source);
+  // Stickers seen: tracked. Painted out: carried on the surface for at most
+  // five frames, then lost. Stickers back: tracked again.
+  EXPECT_EQ(sources[0], "tracked");
+  EXPECT_EQ(sources[1], "tracked");
+  for (int i = 2; i <= 6; ++i) EXPECT_EQ(sources[i], "carried") << "frame " << i << ": " << frames[i].note;
+  for (int i = 7; i <= 8; ++i) {
+    EXPECT_EQ(sources[i], "lost") << "frame " << i;
+    EXPECT_NE(frames[i].note.find("no sticker"), std::string::npos) << frames[i].note;
+  }
+  EXPECT_EQ(sources[9], "tracked") << frames[9].note;
+  // An unreadable colour image: lost, named, and the run goes on.
+  EXPECT_EQ(sources[10], "lost");
+  EXPECT_NE(frames[10].note.find("unreadable or corrupt"), std::string::npos) << frames[10].note;
+  // No depth: tracked from the stickers alone, and said.
+  EXPECT_EQ(sources[11], "tracked") << frames[11].note;
+  EXPECT_NE(frames[11].note.find("no depth"), std::string::npos) << frames[11].note;
+  // A 2 s gap is said; the frame is still tracked.
+  EXPECT_NE(frames[12].note.find("s since the previous frame"), std::string::npos) << frames[12].note;
+  EXPECT_EQ(sources[12], "tracked") << frames[12].note;
+  // Nothing in view: lost; then recovered.
+  EXPECT_EQ(sources[13], "lost") << frames[13].note;
+  EXPECT_EQ(sources[14], "tracked") << frames[14].note;
+
+  // Every pose is the sample frame's true pose within a few millimetres, and
+  // the stored verdicts match the files.
+  const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
+  const Rigid3d truth = sample.BodyGroundTruth()->front().room_from_x;
+  std::ifstream csv(options.out_dir / "corrections.csv");
+  std::string line;
+  std::getline(csv, line);
+  EXPECT_EQ(line + "\n", CorrectionsCsvHeader());
+  for (size_t i = 0; i < frames.size(); ++i) {
+    ASSERT_TRUE(std::getline(csv, line)) << "corrections.csv ends at row " << i;
+    const std::string state = line.substr(line.rfind(',') + 1);
+    EXPECT_EQ(state == "lost", frames[i].status == TrackingFrameStatus::kLost) << line;
+    if (!frames[i].room_from_model) continue;
+    const PoseError e = ComputePoseError(truth, *frames[i].room_from_model);
+    EXPECT_LT(e.translation_mm, 5.0) << "frame " << i;
+    EXPECT_LT(e.rotation_deg, 0.5) << "frame " << i;
+    // The correction written is the one from the pose and the plan.
+    const CouchCorrection expected = ComputeCouchCorrection(*frames[i].room_from_model, inputs.room_from_model_target,
+                                                            {}, options.tolerances);
+    EXPECT_NEAR(frames[i].correction->translation_mm.x(), expected.lateral_mm, 1e-6);
+    EXPECT_NEAR(frames[i].correction->rotation_deg.z(), expected.yaw_deg, 1e-6);
+  }
+  const auto poses = ReadTrajectory(options.out_dir / "poses.txt");
+  int with_pose = 0;
+  for (const auto& f : frames) with_pose += f.room_from_model.has_value();
+  EXPECT_EQ(static_cast<int>(poses.size()), with_pose);
+}
+
+TEST_F(TrackingStage, TrackCommandRefusesBadArgumentsAndStoresNothing) {
+  const auto before = testing::RunArpos("store info --store " + store_.string());
+  auto bad = testing::RunArpos("track " + (case_ / "tracking" / "seq_00").string() + " --store " + store_.string() +
+                               " --out " + (root_ / "out_bad").string() + " --tolerance-mm 0");
+  EXPECT_EQ(bad.status, 2) << bad.output;
+  EXPECT_NE(bad.output.find("tolerance"), std::string::npos) << bad.output;
+  bad = testing::RunArpos("track " + (case_ / "tracking" / "seq_00").string() + " --store " + store_.string() +
+                          " --out " + (root_ / "out_bad").string() + " --session 999");
+  EXPECT_EQ(bad.status, 2) << bad.output;
+  EXPECT_NE(bad.output.find("no session 999"), std::string::npos) << bad.output;
+  const auto after = testing::RunArpos("store info --store " + store_.string());
+  EXPECT_EQ(before.output, after.output);
+}
+
+}  // namespace
+}  // namespace arpos
