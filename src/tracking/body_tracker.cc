@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <deque>
 #include <limits>
@@ -33,8 +34,10 @@ std::string BodyTrackerOptions::Validate() const {
   if (!(depth_gate_initial_m > 0) || !(depth_gate_final_m > 0)) return "depth gates must be positive";
   if (!(huber_sigmas > 0)) return "huber_sigmas must be positive";
   if (max_iterations < 1) return "max_iterations must be at least 1";
+  if (!(convergence_m > 0) || !(convergence_rad > 0)) return "convergence tolerances must be positive";
   if (!(max_sticker_rms_px > 0)) return "max_sticker_rms_px must be positive";
   if (!(sticker_window_margin_px >= 0)) return "sticker_window_margin_px must not be negative";
+  if (max_stickers_searched < 1) return "max_stickers_searched must be at least 1";
   if (!(detection_side_px >= 8)) return "detection_side_px must be at least 8";
   if (!(min_sticker_side_px >= 3)) return "min_sticker_side_px must be at least 3";
   if (!(start_depth_weight_px >= 0)) return "start_depth_weight_px must not be negative";
@@ -67,6 +70,11 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
@@ -113,6 +121,8 @@ struct BodyTracker::Impl {
   int frames_without_stickers = 0;
 
   // Per-frame buffers.
+  std::vector<std::pair<int, float>> candidates;
+  std::vector<int> cells;
   std::vector<int> visible;
   std::vector<float> zbuffer;
 
@@ -139,7 +149,20 @@ struct BodyTracker::Impl {
   void SearchAround(const Rigid3d& camera_from_model, const BodyTrackerOptions& o,
                     std::vector<MarkerObservation>* found) {
     found->clear();
+    // The largest predicted stickers first: ArUco reads those best, and the
+    // others are refined where the fitted pose puts them (RefineAtPose).
+    std::vector<std::pair<double, int>> by_size;
     for (const auto& [id, model_from_sticker] : model_from_marker) {
+      const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
+      const Eigen::Vector3d centre = camera_from_sticker.translation;
+      const Eigen::Vector3d normal = camera_from_sticker.rotation * Eigen::Vector3d::UnitZ();
+      if (centre.z() < 0.1) continue;
+      by_size.emplace_back(-normal.dot(centre) / centre.squaredNorm(), id);  // ~ apparent area
+    }
+    std::sort(by_size.rbegin(), by_size.rend());
+    if (static_cast<int>(by_size.size()) > o.max_stickers_searched) by_size.resize(o.max_stickers_searched);
+    for (const auto& [size, id] : by_size) {
+      const Rigid3d& model_from_sticker = model_from_marker.at(id);
       const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
       const Eigen::Vector3d centre = camera_from_sticker.translation;
       const Eigen::Vector3d normal = camera_from_sticker.rotation * Eigen::Vector3d::UnitZ();
@@ -272,10 +295,8 @@ struct BodyTracker::Impl {
     zbuffer.assign(static_cast<size_t>(gw) * gh, std::numeric_limits<float>::infinity());
     const Eigen::Matrix3d R = camera_from_model.RotationMatrix();
     const Eigen::Vector3d t = camera_from_model.translation;
-    std::vector<std::pair<int, float>> candidates;
-    candidates.reserve(model_points.size() / 2);
-    std::vector<int> cells;
-    cells.reserve(model_points.size() / 2);
+    candidates.clear();
+    cells.clear();
     for (size_t i = 0; i < model_points.size(); ++i) {
       const Eigen::Vector3d p = R * model_points[i] + t;
       if (p.z() < 0.1) continue;
@@ -409,6 +430,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   // for ArUco when the sticker is small, corners refined on the frame
   // itself), else in the whole image.
   const auto t_detect = Clock::now();
+  const double cpu_detect = ThreadCpuMs();
   cv::cvtColor(frame.color, m.gray, cv::COLOR_BGR2GRAY);
   std::vector<MarkerObservation> found;
   if (predicted) m.SearchAround(*predicted, o, &found);
@@ -505,6 +527,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   }
   result.timings.detection_ms = MsSince(t_detect);
   const auto t_pose = Clock::now();
+  const double cpu_pose = ThreadCpuMs();
   ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
                             << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
   if (!start_pose) {
@@ -521,12 +544,13 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   double chi2 = 0;
   int dof = 0, depth_inliers = 0, depth_candidates = 0;
   double depth_sq = 0;
-  auto fit = [&](const Rigid3d& from) {
+  std::optional<Rigid3d> visible_at;  // the pose the visible points were found for
+  auto fit = [&](const Rigid3d& from, int max_iterations) {
   use.assign(stickers.size(), 1);
   result.stickers_dropped.clear();
   for (int round = 0; round < 4; ++round) {
     pose = from;
-    for (int it = 0; it < o.max_iterations; ++it) {
+    for (int it = 0; it < max_iterations; ++it) {
       Matrix6d H = Matrix6d::Zero();
       Vector6d g = Vector6d::Zero();
       chi2 = 0;
@@ -559,8 +583,13 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
       depth_candidates = 0;
       depth_sq = 0;
       if (have_depth) {
-        // Visibility from the start pose, then once more near convergence.
-        if (it == 0 || it == 3) m.FindVisible(pose, o.zbuffer_cell_px, o.zbuffer_tolerance_m, o.max_depth_points, nullptr);
+        // Visibility from where the pose is, recomputed only when it has
+        // moved (a few mm or a degree change nothing at 8 mm sampling).
+        if (!visible_at || (pose.translation - visible_at->translation).norm() > 0.004 ||
+            visible_at->rotation.angularDistance(pose.rotation) > 0.02) {
+          m.FindVisible(pose, o.zbuffer_cell_px, o.zbuffer_tolerance_m, o.max_depth_points, nullptr);
+          visible_at = pose;
+        }
         const double gate = it < 2 ? o.depth_gate_initial_m : o.depth_gate_final_m;
         const Eigen::Matrix3d R = pose.RotationMatrix();
         Matrix6d Hd = Matrix6d::Zero();
@@ -619,7 +648,14 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
       const Vector6d step = -ldlt.solve(g);
       if (!step.allFinite()) break;
       pose = Rigid3d::FromRotationVector(step.head<3>(), step.tail<3>()) * pose;
-      if (step.head<3>().norm() < 1e-6 && step.tail<3>().norm() < 1e-6) break;
+      if (step.head<3>().norm() < o.convergence_rad && step.tail<3>().norm() < o.convergence_m) {
+        ARPOS_DEBUG("body fit converged after " << it + 1 << " iterations, round " << round);
+        break;
+      }
+      if (it + 1 == max_iterations) {
+        ARPOS_DEBUG("body fit stopped at " << max_iterations << " iterations, round " << round << ", step "
+                                           << step.tail<3>().norm() * 1000 << " mm");
+      }
     }
     // Drop the worst sticker if it disagrees with the rest and the surface.
     int worst = -1;
@@ -635,7 +671,8 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
     if (std::count(use.begin(), use.end(), 1) == 0) break;
   }
   };
-  fit(*start_pose);
+  // A first fit good to a pixel at the stickers is all step 5 needs.
+  fit(*start_pose, std::min(o.max_iterations, 4));
   // 5. Stickers too small or blurred for ArUco to read are refined where
   // the fitted pose puts them (their identity is the prediction's), then
   // the fit is repeated with them; one that disagrees is dropped as above.
@@ -645,13 +682,16 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
       if (use[si]) have.push_back(stickers[si].id);
     }
     std::vector<MarkerObservation> at_pose;
+    const double c0 = ThreadCpuMs();
     m.RefineAtPose(pose, have, o, &at_pose);
+    ARPOS_DEBUG("body frame " << frame.index << ": cpu refine-at-pose " << ThreadCpuMs() - c0 << " ms, "
+                              << at_pose.size() << " stickers");
     std::vector<SeenSticker> extra = make_stickers(at_pose);
     if (!extra.empty()) {
       result.stickers_refined_at_pose = static_cast<int>(extra.size());
       stickers.insert(stickers.end(), extra.begin(), extra.end());
       carried = false;
-      fit(pose);
+      fit(pose, o.max_iterations);
     }
   }
   double rms_sum = 0;
@@ -668,6 +708,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   const double inlier_fraction = depth_candidates ? static_cast<double>(depth_inliers) / depth_candidates : 0;
   const bool surface_ok = depth_inliers >= o.min_depth_inliers && inlier_fraction >= o.min_depth_inlier_fraction;
 
+  ARPOS_DEBUG("body frame " << frame.index << ": cpu detect " << cpu_pose - cpu_detect << " ms, pose " << ThreadCpuMs() - cpu_pose << " ms");
   ARPOS_DEBUG("body frame " << frame.index << ": " << n_stickers << " stickers (rms " << result.sticker_rms_px
                             << " px), depth " << depth_inliers << "/" << depth_candidates << " inliers, rms "
                             << result.depth_rms_mm << " mm");

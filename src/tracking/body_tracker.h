@@ -55,13 +55,13 @@ struct BodyTrackerOptions {
   double marker_size_m = 0.03;
 
   /// The model's surface sampled every this many metres (vertices merged).
-  double model_spacing_m = 0.005;
+  double model_spacing_m = 0.008;
   /// Hidden-point removal: z-buffer cells (px) and the depth tolerance behind
   /// the nearest surface point of a cell.
   int zbuffer_cell_px = 4;
   double zbuffer_tolerance_m = 0.012;
   /// At most this many visible model points enter the fit (evenly thinned).
-  int max_depth_points = 2500;
+  int max_depth_points = 1000;
   bool use_depth = true;
 
   /// Corner noise floor (px, 1 sigma); the edge fit's own sigma when larger.
@@ -78,6 +78,9 @@ struct BodyTrackerOptions {
   /// Huber threshold on normalised residuals (sigmas), corners and depth.
   double huber_sigmas = 2.5;
   int max_iterations = 10;
+  /// Converged when an update moves less than both (10 um, 0.0006 deg).
+  double convergence_m = 1e-5;
+  double convergence_rad = 1e-5;
   /// Start pose: a candidate's cost is its stickers' corner RMS (px, each
   /// capped at 30) plus this many px times the share of the model's surface
   /// that disagrees with the depth.
@@ -97,6 +100,8 @@ struct BodyTrackerOptions {
   /// than `min_sticker_side_px` are not searched. Without a prediction the
   /// whole image is searched.
   double sticker_window_margin_px = 12;
+  /// At most this many stickers (the largest predicted) are searched so.
+  int max_stickers_searched = 4;
   double detection_side_px = 30;
   double min_sticker_side_px = 6;
   /// Surface-only ("carried") frames allowed after the last frame with a

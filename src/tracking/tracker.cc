@@ -26,6 +26,8 @@ std::string TrackerOptions::Validate() const {
   if (!problem.empty()) return problem;
   if (!(uncertainty_sigmas >= 0)) return "uncertainty_sigmas must not be negative";
   if (!(uncertainty_floor_mm >= 0) || !(uncertainty_floor_deg >= 0)) return "uncertainty floors must not be negative";
+  problem = filter.Validate();
+  if (!problem.empty()) return "filter: " + problem;
   return "";
 }
 
@@ -41,9 +43,11 @@ const char* TrackingStateName(TrackingState state) {
 Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
                  const Rigid3d& room_from_model_target, const CameraIntrinsics& intrinsics,
                  const TrackerOptions& options)
-    : options_(options), target_(room_from_model_target), intrinsics_(intrinsics) {
-  const std::string problem = options_.Validate();
-  ARPOS_CHECK(problem.empty(), "tracker options: " << problem);
+    : options_(options), target_(room_from_model_target), intrinsics_(intrinsics), filter_([&] {
+        const std::string problem = options.Validate();
+        ARPOS_CHECK(problem.empty(), "tracker options: " << problem);
+        return options.filter;
+      }()) {
   camera_ = std::make_unique<CameraLocalizer>(std::move(map), intrinsics, options_.camera);
   body_ = std::make_unique<BodyTracker>(model, std::move(model_from_marker), intrinsics, options_.body);
 }
@@ -147,10 +151,30 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     out.position_sigma_mm = std::sqrt(cam_pos_mm * cam_pos_mm + std::pow(1000 * cam_rot_rad * distance_m, 2) +
                                       out.body.position_sigma_mm * out.body.position_sigma_mm);
     out.rotation_sigma_deg = std::hypot(out.camera.rotation_sigma_deg, out.body.rotation_sigma_deg);
+    out.measured_room_from_model = out.room_from_model;
+    out.measured_position_sigma_mm = out.position_sigma_mm;
+    out.measured_rotation_sigma_deg = out.rotation_sigma_deg;
+    if (options_.temporal_filter) {
+      const FilteredPose f = filter_.Update(frame.timestamp_s, *out.room_from_model, out.position_sigma_mm / 1000,
+                                            out.rotation_sigma_deg / kDegPerRad);
+      out.room_from_model = f.room_from_model;
+      out.position_sigma_mm = 1000 * f.position_sigma_m;
+      out.rotation_sigma_deg = kDegPerRad * f.rotation_sigma_rad;
+    }
     CorrectionUncertainty bound;
     bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out.position_sigma_mm);
     bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out.rotation_sigma_deg);
     out.correction = ComputeCouchCorrection(*out.room_from_model, target_, bound, options_.tolerances);
+    // `in` only when this frame's own estimate agrees: the filter's bound
+    // holds only as long as its motion model does.
+    if (options_.temporal_filter && out.correction.state == CorrectionState::kIn) {
+      CorrectionUncertainty own;
+      own.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out.measured_position_sigma_mm);
+      own.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out.measured_rotation_sigma_deg);
+      if (ComputeCouchCorrection(*out.measured_room_from_model, target_, own, options_.tolerances).state != CorrectionState::kIn) {
+        out.correction.state = CorrectionState::kOut;
+      }
+    }
     out.message = out.body.source == BodyPoseSource::kCarried ? out.body.message : depth_note;
   }
   out.timings.combine_ms = MsSince(t_combine);

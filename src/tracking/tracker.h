@@ -12,7 +12,10 @@
 /// uncertainty at the isocentre (the camera's position and rotation errors,
 /// the latter acting over the camera-to-isocentre distance, and the body's),
 /// and the correction (feedback/couch_correction.h) with that uncertainty
-/// (`uncertainty_sigmas` of it) added before the tolerance test.
+/// (`uncertainty_sigmas` of it) added before the tolerance test. With the
+/// temporal filter (pose_filter.h) the reported pose and correction are the
+/// filtered ones, and a frame reads `in` only when both the filtered and the
+/// frame's own estimate, each with its bound, are within tolerance.
 /// A frame is lost when either half is lost; nothing is guessed.
 ///
 /// Thread-safety: one Tracker per stream; Process() is called from one thread.
@@ -30,6 +33,7 @@
 #include "sensor/intrinsics.h"
 #include "sensor/rgbd_frame.h"
 #include "tracking/body_tracker.h"
+#include "tracking/pose_filter.h"
 
 namespace arpos {
 
@@ -45,6 +49,10 @@ struct TrackerOptions {
   /// Scene and body on two threads (false: one after the other, e.g. to
   /// measure each alone).
   bool parallel = true;
+  /// The patient's room pose through a constant-velocity filter weighted by
+  /// each frame's uncertainty (pose_filter.h); false: each frame alone.
+  bool temporal_filter = true;
+  PoseFilterOptions filter;
 
   std::string Validate() const;
 };
@@ -73,8 +81,13 @@ struct TrackedFrame {
   std::optional<Rigid3d> room_from_camera;
   std::optional<Rigid3d> camera_from_model;
   std::optional<Rigid3d> room_from_model;
-  /// 1-sigma uncertainty of room_from_model: position at the isocentre
-  /// (largest axis) and rotation.
+  /// This frame's own estimate before the temporal filter, and its 1-sigma
+  /// uncertainty.
+  std::optional<Rigid3d> measured_room_from_model;
+  double measured_position_sigma_mm = 0;
+  double measured_rotation_sigma_deg = 0;
+  /// 1-sigma uncertainty of room_from_model (after the filter): position at
+  /// the isocentre (largest axis) and rotation.
   double position_sigma_mm = 0;
   double rotation_sigma_deg = 0;
   CouchCorrection correction;
@@ -113,6 +126,7 @@ class Tracker {
   // The last room poses of camera and patient: where to look for the
   // patient when the body tracker has lost it.
   std::optional<Rigid3d> last_room_from_camera_, last_room_from_model_;
+  PoseFilter filter_;
   double last_camera_t_ = -1, last_model_t_ = -1;
 };
 
