@@ -522,7 +522,10 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
         start_pose = choose_start(stickers);
       }
     }
-  } else if (predicted && !from_hint && m.frames_without_stickers < o.max_frames_without_stickers && have_depth) {
+  } else if (predicted && have_depth) {
+    // No sticker read: the surface from the prediction, then the stickers
+    // refined where it puts them (step 5). Without any, the pose is carried
+    // only for a few frames.
     start_pose = predicted;
   }
   result.timings.detection_ms = MsSince(t_detect);
@@ -735,9 +738,12 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
     accept = surface_ok;
     if (!accept) result.message = "one sticker and too little surface in depth";
   } else if (carried) {
-    accept = surface_ok;
-    if (!accept) result.message = StringPrintf("no sticker; the surface alone does not hold (%d depth inliers, %.0f %%)",
-                                               depth_inliers, 100 * inlier_fraction);
+    accept = surface_ok && !from_hint && m.frames_without_stickers < o.max_frames_without_stickers;
+    if (!accept) {
+      result.message = !surface_ok ? StringPrintf("no sticker in view; the surface alone does not hold (%d depth "
+                                                  "inliers, %.0f %%)", depth_inliers, 100 * inlier_fraction)
+                                   : StringPrintf("no sticker in view for %d frames", m.frames_without_stickers + 1);
+    }
   } else {
     result.message = "every sticker disagreed with the others and the surface";
   }

@@ -42,12 +42,13 @@ const char* TrackingStateName(TrackingState state) {
 
 Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
                  const Rigid3d& room_from_model_target, const CameraIntrinsics& intrinsics,
-                 const TrackerOptions& options)
+                 const TrackerOptions& options, const std::optional<Rigid3d>& room_from_model_expected)
     : options_(options), target_(room_from_model_target), intrinsics_(intrinsics), filter_([&] {
         const std::string problem = options.Validate();
         ARPOS_CHECK(problem.empty(), "tracker options: " << problem);
         return options.filter;
       }()) {
+  expected_room_from_model_ = room_from_model_expected;
   camera_ = std::make_unique<CameraLocalizer>(std::move(map), intrinsics, options_.camera);
   body_ = std::make_unique<BodyTracker>(model, std::move(model_from_marker), intrinsics, options_.body);
 }
@@ -94,10 +95,15 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   };
   // The patient is where it was last seen in the room, seen from where the
   // camera last was (both recent): a start for the body tracker after a loss.
+  // Before the patient is first found (or long after it was last seen),
+  // where it is expected.
   std::optional<Rigid3d> hint;
-  if (last_room_from_camera_ && last_room_from_model_ && frame.timestamp_s - last_camera_t_ < 0.5 &&
-      frame.timestamp_s - last_model_t_ < 5.0) {
-    hint = last_room_from_camera_->Inverse() * *last_room_from_model_;
+  if (last_room_from_camera_ && frame.timestamp_s - last_camera_t_ < 0.5) {
+    if (last_room_from_model_ && frame.timestamp_s - last_model_t_ < 5.0) {
+      hint = last_room_from_camera_->Inverse() * *last_room_from_model_;
+    } else if (expected_room_from_model_) {
+      hint = last_room_from_camera_->Inverse() * *expected_room_from_model_;
+    }
   }
   auto run_body = [&] {
     const auto t0 = Clock::now();

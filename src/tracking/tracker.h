@@ -103,9 +103,13 @@ class Tracker {
   /// the session's stickers in the model frame; `room_from_model_target`: the
   /// planned pose. Throws arpos::Error for invalid options, InputError for
   /// unusable inputs.
+  /// `room_from_model_expected`: where the patient is expected before it is
+  /// first found (e.g. its pose at the session's body scan); the body
+  /// tracker looks there first when its stickers are too small to read in
+  /// the whole image.
   Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
           const Rigid3d& room_from_model_target, const CameraIntrinsics& intrinsics,
-          const TrackerOptions& options);
+          const TrackerOptions& options, const std::optional<Rigid3d>& room_from_model_expected = std::nullopt);
   ~Tracker();
   Tracker(const Tracker&) = delete;
   Tracker& operator=(const Tracker&) = delete;
@@ -125,7 +129,7 @@ class Tracker {
   std::unique_ptr<BodyTracker> body_;
   // The last room poses of camera and patient: where to look for the
   // patient when the body tracker has lost it.
-  std::optional<Rigid3d> last_room_from_camera_, last_room_from_model_;
+  std::optional<Rigid3d> last_room_from_camera_, last_room_from_model_, expected_room_from_model_;
   PoseFilter filter_;
   double last_camera_t_ = -1, last_model_t_ = -1;
 };

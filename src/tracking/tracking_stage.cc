@@ -106,6 +106,7 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   const std::optional<BodyMarkerMapRecord> markers = database->GetBodyMarkerMap(pieces->marker_map);
   if (!markers) ARPOS_INPUT_ERROR("body marker map " << pieces->marker_map.value() << " could not be read");
   in.sticker_size_m = markers->marker_size_m;
+  in.room_from_model_at_scan = pieces->alignment.reconstruction_from_model;
   const Rigid3d model_from_body = pieces->alignment.reconstruction_from_model.Inverse();
   for (const auto& m : markers->markers) in.model_from_marker[m.marker_id] = model_from_body * m.body_from_marker;
   if (in.model_from_marker.empty()) {
@@ -166,7 +167,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   tracker_options.body.detector.edge.response = response.response;
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;
   Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target,
-                  config.camera, tracker_options);
+                  config.camera, tracker_options, inputs.room_from_model_at_scan);
   std::optional<OverlayRenderer> overlay;
   if (options.overlay) overlay.emplace(inputs.model, config.camera);
 

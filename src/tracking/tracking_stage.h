@@ -45,6 +45,9 @@ struct TrackingInputs {
   /// reconstruction_from_model^-1 * body_from_marker.
   std::map<int, Rigid3d> model_from_marker;
   double sticker_size_m = 0;
+  /// The patient's pose at the session's body scan (the alignment): where
+  /// tracking looks first.
+  Rigid3d room_from_model_at_scan;
 };
 
 /// The inputs of `session` if given, else of the newest session (with a
