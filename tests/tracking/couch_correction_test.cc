@@ -71,6 +71,39 @@ TEST(CouchCorrection, ApplyingTheCorrectionReachesThePlannedPose) {
   EXPECT_NEAR(c.rotation_deg, 1.7, 1e-9);
 }
 
+// What the README tells the therapist: positive pitch raises the head end,
+// positive roll lowers the patient's left side, positive yaw turns the head
+// towards the patient's right; positive lateral/longitudinal/vertical move the
+// patient to their left, towards the gantry, up.
+TEST(CouchCorrection, SignsAsTheReadmeStatesThem) {
+  const Rigid3d target = Target();
+  const Rigid3d model_from_room = target.Inverse();
+  // Where a model point ends up after the couch applies `c` to a patient at the
+  // planned pose, in the planned model's axes (x left, y down, z head).
+  auto moved = [&](CouchCorrection c, const Eigen::Vector3d& point) {
+    const Rigid3d after = ApplyCouchCorrection(target, c, target);
+    return Eigen::Vector3d(model_from_room * (after * point));
+  };
+  CouchCorrection c;
+  c.pitch_deg = 1;
+  EXPECT_LT(moved(c, {0, 0, 0.8}).y(), -0.01);  // head end up (y is down)
+  c = CouchCorrection();
+  c.roll_deg = 1;
+  EXPECT_GT(moved(c, {0.2, 0, 0}).y(), 0.003);  // left side down
+  c = CouchCorrection();
+  c.yaw_deg = 1;
+  EXPECT_LT(moved(c, {0, 0, 0.8}).x(), -0.01);  // head towards the patient's right
+  c = CouchCorrection();
+  c.lateral_mm = 5;
+  EXPECT_NEAR(moved(c, {0, 0, 0}).x(), 0.005, 1e-12);
+  c = CouchCorrection();
+  c.longitudinal_mm = 5;
+  EXPECT_NEAR(moved(c, {0, 0, 0}).z(), 0.005, 1e-12);
+  c = CouchCorrection();
+  c.vertical_mm = 5;
+  EXPECT_NEAR(moved(c, {0, 0, 0}).y(), -0.005, 1e-12);
+}
+
 TEST(CouchCorrection, InOnlyWhenTheCorrectionPlusItsUncertaintyIsWithinTolerance) {
   CouchTolerances tol;
   tol.translation_mm = 2;
