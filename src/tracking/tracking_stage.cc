@@ -312,7 +312,8 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
       "sequence: %s\nout: %s\noverlay: %s\nparallel: %s\nuncertainty_sigmas: %g\nbody_marker_map: %lld\n"
       "room_map: %lld\nresponse: %s\n",
       std::filesystem::absolute(options.sequence_dir).lexically_normal().string().c_str(),
-      std::filesystem::absolute(options.out_dir).lexically_normal().string().c_str(), options.overlay ? "true" : "false",
+      write_files ? std::filesystem::absolute(options.out_dir).lexically_normal().string().c_str() : "(none)",
+      options.overlay ? "true" : "false",
       options.parallel ? "true" : "false", tracker_options.uncertainty_sigmas,
       static_cast<long long>(inputs.body_marker_map_id.value()), static_cast<long long>(inputs.room_map_id.value()),
       response.message.c_str());

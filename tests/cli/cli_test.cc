@@ -1,4 +1,5 @@
 // Runs the real `arpos` executable as a user would.
+#include <filesystem>
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -42,10 +43,21 @@ TEST(Cli, RunCaseOnTheSampleSessionDoesEveryStage) {
             2);
   EXPECT_LT(mm, 5.0) << r.output;
   EXPECT_LT(deg, 0.5) << r.output;
-  // Running it again adds a second session to the same store.
-  const Result again =
-      RunArpos("run-case " + std::string(ARPOS_SAMPLE_SESSIONS_DIR) + "/demo_xtion --store " + store);
+  // Tracking ran on tracking/seq_00 and was evaluated (no files without --out).
+  const size_t tracked = r.output.find("tracking seq_00 vs body_groundtruth.txt: MTE ");
+  ASSERT_NE(tracked, std::string::npos) << r.output;
+  double mte = -1;
+  ASSERT_EQ(std::sscanf(r.output.c_str() + tracked, "tracking seq_00 vs body_groundtruth.txt: MTE %lf", &mte), 1);
+  EXPECT_LT(mte, 5.0) << r.output;
+  // Running it again, with --out, adds a second session to the same store and
+  // writes the tracking files and the overlay.
+  const Result again = RunArpos("run-case " + std::string(ARPOS_SAMPLE_SESSIONS_DIR) + "/demo_xtion --store " +
+                                store + " --out " + (dir.path() / "out").string());
   EXPECT_EQ(again.status, 0) << again.output;
+  for (const char* file : {"seq_00/poses.txt", "seq_00/camera_poses.txt", "seq_00/corrections.csv",
+                           "seq_00/timing.csv", "seq_00/overlay/2000.000000.png", "model_pose.txt"}) {
+    EXPECT_TRUE(std::filesystem::exists(dir.path() / "out" / file)) << file;
+  }
   const Result info = RunArpos("store info --store " + store);
   EXPECT_EQ(info.status, 0) << info.output;
 }
