@@ -32,9 +32,11 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
       "  --overlay           write the AR overlay of every frame\n"
       "  --tolerance-mm MM   translation tolerance (default 2)\n"
       "  --tolerance-deg DEG rotation tolerance (default 1)\n"
-      "  --sequential        scene and body one after the other (default: two threads)\n";
+      "  --sequential        scene and body one after the other (default: two threads)\n"
+      "  --no-filter         each frame's own pose (default: the patient's room pose through\n"
+      "                      a constant-velocity filter weighted by each frame's uncertainty)\n";
   const Args args(argv, {"store", "session", "out", "case", "tolerance-mm", "tolerance-deg"},
-                  {"overlay", "sequential", "help"});
+                  {"overlay", "sequential", "no-filter", "help"});
   if (args.Has("help")) {
     std::cout << usage;
     return 0;
@@ -59,6 +61,7 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
   options.out_dir = out_dir;
   options.overlay = args.Has("overlay");
   options.parallel = !args.Has("sequential");
+  options.temporal_filter = !args.Has("no-filter");
   options.tolerances.translation_mm = args.GetDouble("tolerance-mm", 2.0);
   options.tolerances.rotation_deg = args.GetDouble("tolerance-deg", 1.0);
   const std::string tol_problem = options.tolerances.Validate();

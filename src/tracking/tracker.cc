@@ -26,6 +26,7 @@ std::string TrackerOptions::Validate() const {
   if (!problem.empty()) return problem;
   if (!(uncertainty_sigmas >= 0)) return "uncertainty_sigmas must not be negative";
   if (!(uncertainty_floor_mm >= 0) || !(uncertainty_floor_deg >= 0)) return "uncertainty floors must not be negative";
+  if (!(max_position_sigma_mm > 0)) return "max_position_sigma_mm must be positive";
   problem = filter.Validate();
   if (!problem.empty()) return "filter: " + problem;
   return "";
@@ -135,7 +136,22 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   const auto t_combine = Clock::now();
   if (out.camera.ok) out.room_from_camera = out.camera.room_from_camera;
   if (out.body.ok) out.camera_from_model = out.body.camera_from_model;
-  if (!out.camera.ok || !out.body.ok) {
+  // The frame's own uncertainty at the isocentre: the camera's position
+  // error, its rotation error swinging the isocentre at its distance, and
+  // the body's.
+  double own_sigma_mm = 0;
+  if (out.camera.ok && out.body.ok) {
+    const double distance_m = out.body.camera_from_model.translation.norm();
+    const double cam_rot_rad = out.camera.rotation_sigma_deg / kDegPerRad;
+    own_sigma_mm = std::sqrt(std::pow(out.camera.position_sigma_mm, 2) + std::pow(1000 * cam_rot_rad * distance_m, 2) +
+                             std::pow(out.body.position_sigma_mm, 2));
+  }
+  if (out.camera.ok && out.body.ok && own_sigma_mm > options_.max_position_sigma_mm) {
+    out.message = StringPrintf("pose too uncertain: %.1f mm at the isocentre (1 sigma; camera %.1f mm, %.2f deg; "
+                               "patient %.1f mm)",
+                               own_sigma_mm, out.camera.position_sigma_mm, out.camera.rotation_sigma_deg,
+                               out.body.position_sigma_mm);
+  } else if (!out.camera.ok || !out.body.ok) {
     std::string why;
     if (!out.camera.ok) why = "camera not localised in the room" + (out.camera.message.empty() ? "" : " (" + out.camera.message + ")");
     if (!out.body.ok) {
@@ -149,13 +165,7 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     last_room_from_model_ = out.room_from_model;
     last_model_t_ = frame.timestamp_s;
     out.state = out.body.source == BodyPoseSource::kCarried ? TrackingState::kCarried : TrackingState::kTracked;
-    // Uncertainty at the isocentre: the camera's own position error, its
-    // rotation error swinging the isocentre at its distance, and the body's.
-    const double distance_m = out.body.camera_from_model.translation.norm();
-    const double cam_rot_rad = out.camera.rotation_sigma_deg / kDegPerRad;
-    const double cam_pos_mm = out.camera.position_sigma_mm;
-    out.position_sigma_mm = std::sqrt(cam_pos_mm * cam_pos_mm + std::pow(1000 * cam_rot_rad * distance_m, 2) +
-                                      out.body.position_sigma_mm * out.body.position_sigma_mm);
+    out.position_sigma_mm = own_sigma_mm;
     out.rotation_sigma_deg = std::hypot(out.camera.rotation_sigma_deg, out.body.rotation_sigma_deg);
     out.measured_room_from_model = out.room_from_model;
     out.measured_position_sigma_mm = out.position_sigma_mm;

@@ -46,6 +46,11 @@ struct TrackerOptions {
   double uncertainty_sigmas = 3.0;
   double uncertainty_floor_mm = 0.3;
   double uncertainty_floor_deg = 0.05;
+  /// A frame whose own pose is less certain than this at the isocentre (1
+  /// sigma, mostly the camera's rotation acting over its distance) is lost:
+  /// a correction known only to centimetres helps no one, and its overlay
+  /// would mislead.
+  double max_position_sigma_mm = 10.0;
   /// Scene and body on two threads (false: one after the other, e.g. to
   /// measure each alone).
   bool parallel = true;

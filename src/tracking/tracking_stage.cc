@@ -161,6 +161,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   TrackerOptions tracker_options = MakeTrackerOptions(config, inputs);
   tracker_options.tolerances = options.tolerances;
   tracker_options.parallel = options.parallel;
+  tracker_options.temporal_filter = options.temporal_filter;
   const RecordingResponse response = EstimateRecordingResponse(sequence, config, inputs.room_map.camera_response);
   result.response_message = response.message;
   tracker_options.camera.detector.edge.response = response.response;
@@ -309,12 +310,14 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   run.tolerance_rotation_deg = options.tolerances.rotation_deg;
   run.sequence_name = result.name;
   run.options = StringPrintf(
-      "sequence: %s\nout: %s\noverlay: %s\nparallel: %s\nuncertainty_sigmas: %g\nbody_marker_map: %lld\n"
+      "sequence: %s\nout: %s\noverlay: %s\nparallel: %s\ntemporal_filter: %s\nuncertainty_sigmas: %g\n"
+      "body_marker_map: %lld\n"
       "room_map: %lld\nresponse: %s\n",
       std::filesystem::absolute(options.sequence_dir).lexically_normal().string().c_str(),
       write_files ? std::filesystem::absolute(options.out_dir).lexically_normal().string().c_str() : "(none)",
       options.overlay ? "true" : "false",
-      options.parallel ? "true" : "false", tracker_options.uncertainty_sigmas,
+      options.parallel ? "true" : "false", options.temporal_filter ? "true" : "false",
+      tracker_options.uncertainty_sigmas,
       static_cast<long long>(inputs.body_marker_map_id.value()), static_cast<long long>(inputs.room_map_id.value()),
       response.message.c_str());
   run.summary = result.Summary();

@@ -75,6 +75,8 @@ struct TrackSequenceOptions {
   double max_frame_gap_s = 0.25;
   /// Tracking on two threads (scene and body); false for one.
   bool parallel = true;
+  /// The patient's room pose through the constant-velocity filter (tracker.h).
+  bool temporal_filter = true;
   /// Progress: frame index and count, after each frame.
   std::function<void(size_t, size_t)> progress;
 };
