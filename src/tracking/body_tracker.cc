@@ -77,6 +77,8 @@ double ThreadCpuMs() {
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 using Vector6d = Eigen::Matrix<double, 6, 1>;
+// The last pose predicts the next frame for at most this long (s).
+constexpr double kPredictionMaxAgeS = 0.5;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 Eigen::Matrix3d Skew(const Eigen::Vector3d& p) {
@@ -192,8 +194,6 @@ struct BodyTracker::Impl {
         crop.copyTo(window_up);
       }
       coarse->Detect(window_up, &scratch);
-      ARPOS_DEBUG("sticker " << id << ": side " << side << " px, window " << (x1 - x0) << "x" << (y1 - y0) << " x" << k
-                             << ", " << scratch.size() << " detections");
       for (const MarkerObservation& obs : scratch) {
         if (obs.id != id) continue;
         std::array<Eigen::Vector2d, 4> initial;
@@ -203,8 +203,6 @@ struct BodyTracker::Impl {
                        Eigen::Vector2d(x0, y0);
         }
         const CornerRefinementResult r = RefineMarkerCorners(gray, initial, edge, undistorter, &workspace);
-        ARPOS_DEBUG("sticker " << id << ": side " << side << " px, x" << k << ", refinement "
-                               << MarkerStatusName(r.status) << " " << r.failure);
         MarkerObservation out = obs;
         out.detected_corners_px = initial;
         out.status = r.status;
@@ -384,6 +382,10 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
 
 BodyTracker::~BodyTracker() = default;
 
+bool BodyTracker::HasRecentPose(double t) const {
+  return !impl_->past.empty() && t >= impl_->past.back().t && t - impl_->past.back().t < kPredictionMaxAgeS;
+}
+
 void BodyTracker::Reset() {
   impl_->past.clear();
   impl_->frames_without_stickers = 0;
@@ -411,7 +413,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
 
   // 1. Prediction (constant velocity of camera_from_model) and the window.
   std::optional<Rigid3d> predicted;
-  if (!m.past.empty() && frame.timestamp_s - m.past.back().t < 0.5 &&
+  if (!m.past.empty() && frame.timestamp_s - m.past.back().t < kPredictionMaxAgeS &&
       frame.timestamp_s >= m.past.back().t) {
     predicted = m.past.back().pose;
     if (m.past.size() == 2) {
@@ -685,10 +687,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
       if (use[si]) have.push_back(stickers[si].id);
     }
     std::vector<MarkerObservation> at_pose;
-    const double c0 = ThreadCpuMs();
     m.RefineAtPose(pose, have, o, &at_pose);
-    ARPOS_DEBUG("body frame " << frame.index << ": cpu refine-at-pose " << ThreadCpuMs() - c0 << " ms, "
-                              << at_pose.size() << " stickers");
     std::vector<SeenSticker> extra = make_stickers(at_pose);
     if (!extra.empty()) {
       result.stickers_refined_at_pose = static_cast<int>(extra.size());

@@ -169,6 +169,9 @@ class BodyTracker {
   BodyPoseResult Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint = std::nullopt);
   /// Forgets the last poses: the next frame starts from the stickers alone.
   void Reset();
+  /// Whether a frame at time `t` has a prediction from the tracker's own
+  /// last poses (without one, a caller's hint is what it can start from).
+  bool HasRecentPose(double t) const;
 
   const BodyTrackerOptions& options() const { return options_; }
 

@@ -98,14 +98,15 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   // camera last was (both recent): a start for the body tracker after a loss.
   // Before the patient is first found (or long after it was last seen),
   // where it is expected.
-  std::optional<Rigid3d> hint;
-  if (last_room_from_camera_ && frame.timestamp_s - last_camera_t_ < 0.5) {
+  auto hint_from = [&](const Rigid3d& room_from_camera) -> std::optional<Rigid3d> {
     if (last_room_from_model_ && frame.timestamp_s - last_model_t_ < 5.0) {
-      hint = last_room_from_camera_->Inverse() * *last_room_from_model_;
-    } else if (expected_room_from_model_) {
-      hint = last_room_from_camera_->Inverse() * *expected_room_from_model_;
+      return room_from_camera.Inverse() * *last_room_from_model_;
     }
-  }
+    if (expected_room_from_model_) return room_from_camera.Inverse() * *expected_room_from_model_;
+    return std::nullopt;
+  };
+  std::optional<Rigid3d> hint;
+  if (last_room_from_camera_ && frame.timestamp_s - last_camera_t_ < 0.5) hint = hint_from(*last_room_from_camera_);
   auto run_body = [&] {
     const auto t0 = Clock::now();
     BodyPoseResult r = body_->Track(frame, hint);
@@ -113,7 +114,14 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     return r;
   };
   try {
-    if (options_.parallel) {
+    if (!hint && !body_->HasRecentPose(frame.timestamp_s)) {
+      // Nothing tells the body tracker where to look (first frame, or after
+      // the camera and the patient were both lost): the camera first, then
+      // the body from this frame's camera pose.
+      out.camera = run_camera();
+      if (out.camera.ok) hint = hint_from(out.camera.room_from_camera);
+      out.body = run_body();
+    } else if (options_.parallel) {
       std::future<BodyPoseResult> body = std::async(std::launch::async, run_body);
       out.camera = run_camera();
       out.body = body.get();
