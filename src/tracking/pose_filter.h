@@ -28,8 +28,8 @@ namespace arpos {
 struct PoseFilterOptions {
   /// Unmodelled acceleration (1 sigma, white noise) of the isocentre and of
   /// the rotation.
-  double acceleration_m_s2 = 0.1;
-  double angular_acceleration_rad_s2 = 0.05;
+  double acceleration_m_s2 = 0.3;
+  double angular_acceleration_rad_s2 = 0.2;
   /// An innovation beyond this many sigmas on any axis restarts the filter.
   double reset_sigmas = 4.0;
   /// Frames further apart than this restart the filter (s).
