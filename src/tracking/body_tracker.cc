@@ -97,6 +97,23 @@ struct SeenSticker {
   Rigid3d marker_from_model;
 };
 
+// A sticker observation from an edge-line refinement started at `initial`.
+MarkerObservation Refined(int id, const std::array<Eigen::Vector2d, 4>& initial, const CornerRefinementResult& r) {
+  MarkerObservation out;
+  out.id = id;
+  out.detected_corners_px = initial;
+  out.status = r.status;
+  out.corners_px = r.corners_px;
+  out.corner_sigma_px = r.corner_sigma_px;
+  out.edge_fit_rms_px = r.edge_fit_rms_px;
+  out.max_segment_offset_px = r.max_segment_offset_px;
+  out.edge_inlier_fraction = r.edge_inlier_fraction;
+  out.contrast_grey = r.contrast_grey;
+  out.blur_sigma_px = r.blur_sigma_px;
+  out.noise_sigma_grey = r.noise_sigma_grey;
+  return out;
+}
+
 }  // namespace
 
 struct BodyTracker::Impl {
@@ -202,19 +219,8 @@ struct BodyTracker::Impl {
           initial[c] = (obs.detected_corners_px[c] + Eigen::Vector2d(0.5, 0.5)) / k - Eigen::Vector2d(0.5, 0.5) +
                        Eigen::Vector2d(x0, y0);
         }
-        const CornerRefinementResult r = RefineMarkerCorners(gray, initial, edge, undistorter, &workspace);
-        MarkerObservation out = obs;
-        out.detected_corners_px = initial;
-        out.status = r.status;
-        out.corners_px = r.corners_px;
-        out.corner_sigma_px = r.corner_sigma_px;
-        out.edge_fit_rms_px = r.edge_fit_rms_px;
-        out.max_segment_offset_px = r.max_segment_offset_px;
-        out.edge_inlier_fraction = r.edge_inlier_fraction;
-        out.contrast_grey = r.contrast_grey;
-        out.blur_sigma_px = r.blur_sigma_px;
-        out.noise_sigma_grey = r.noise_sigma_grey;
-        found->push_back(out);
+        found->push_back(
+            Refined(id, initial, RefineMarkerCorners(gray, initial, edge, undistorter, &workspace)));
         break;
       }
     }
@@ -248,19 +254,7 @@ struct BodyTracker::Impl {
       double shift = 0;
       for (int c = 0; c < 4; ++c) shift = std::max(shift, (r.corners_px[c] - px[c]).norm());
       if (shift > std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * side)) continue;
-      MarkerObservation out;
-      out.id = id;
-      out.detected_corners_px = px;
-      out.status = r.status;
-      out.corners_px = r.corners_px;
-      out.corner_sigma_px = r.corner_sigma_px;
-      out.edge_fit_rms_px = r.edge_fit_rms_px;
-      out.max_segment_offset_px = r.max_segment_offset_px;
-      out.edge_inlier_fraction = r.edge_inlier_fraction;
-      out.contrast_grey = r.contrast_grey;
-      out.blur_sigma_px = r.blur_sigma_px;
-      out.noise_sigma_grey = r.noise_sigma_grey;
-      found->push_back(out);
+      found->push_back(Refined(id, px, r));
     }
   }
 

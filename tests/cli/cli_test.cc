@@ -1,8 +1,8 @@
 // Runs the real `arpos` executable as a user would.
-#include <filesystem>
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <filesystem>
 
 #include "cli/cli_util.h"
 #include "sensor/test_case_builder.h"
