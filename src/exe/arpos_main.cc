@@ -63,7 +63,7 @@ const std::vector<Command>& Commands() {
 #ifdef ARPOS_HAVE_SIMULATE
       {"simulate", "write a synthetic case folder with exact ground truth", arpos::RunSimulateCommand},
 #endif
-      {"evaluate", "trajectory error against ground truth (MTE/MRE, lost frames)",
+      {"evaluate", "trajectory or couch-correction error against ground truth (MTE/MRE, lost, in while out)",
        arpos::RunEvaluateCommand},
 #ifdef ARPOS_HAVE_STORE
       {"store", "inspect the session store (store info)", arpos::RunStoreCommand},
