@@ -177,7 +177,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   corrections << CorrectionsCsvHeader();
   timing << "timestamp,load_ms,depth_correction_ms,camera_detection_ms,camera_keypoints_ms,camera_matching_ms,"
             "camera_pnp_ms,camera_refinement_ms,camera_ms,body_detection_ms,body_pose_ms,body_ms,combine_ms,"
-            "total_ms,state\n";
+            "total_ms\n";
   std::vector<TrackingFrameRecord> records;
   std::vector<double> totals;
   double last_t = -1;
@@ -231,10 +231,11 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     if (tracked.room_from_camera) camera_poses.push_back({t, *tracked.room_from_camera});
     corrections << CorrectionsCsvRow(t, tracked.correction);
     const TrackingTimings& tm = tracked.timings;
-    timing << StringPrintf("%.6f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%s\n", t, load_ms,
+    // DATASET.md: every column after the timestamp is milliseconds.
+    timing << StringPrintf("%.6f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n", t, load_ms,
                            depth_ms, tm.camera.detection_ms, tm.camera.keypoints_ms, tm.camera.matching_ms,
                            tm.camera.pnp_ms, tm.camera.refinement_ms, tm.camera_ms, tm.body.detection_ms,
-                           tm.body.pose_ms, tm.body_ms, tm.combine_ms, tm.total_ms, TrackingStateName(tracked.state));
+                           tm.body.pose_ms, tm.body_ms, tm.combine_ms, tm.total_ms);
     if (readable) totals.push_back(tm.total_ms);
 
     TrackingFrameRecord record;

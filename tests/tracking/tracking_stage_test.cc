@@ -3,6 +3,7 @@
 // frame without depth, a timestamp gap and a frame with nothing in view.
 // Each gives its stated state, the run goes on, tracking recovers, and what
 // is stored agrees with the files.
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -183,6 +184,25 @@ TEST_F(TrackingStage, BadFramesAreStatedAndTrackingRecovers) {
     EXPECT_NEAR(frames[i].correction->translation_mm.x(), expected.lateral_mm, 1e-6);
     EXPECT_NEAR(frames[i].correction->rotation_deg.z(), expected.yaw_deg, 1e-6);
   }
+  // timing.csv (DATASET.md): a header with timestamp and total_ms, then one
+  // row a frame, every column a number.
+  std::ifstream timing(options.out_dir / "timing.csv");
+  std::string header;
+  std::getline(timing, header);
+  EXPECT_EQ(header.rfind("timestamp,", 0), 0u) << header;
+  EXPECT_NE(header.find(",total_ms"), std::string::npos) << header;
+  const auto columns = std::count(header.begin(), header.end(), ',');
+  int rows = 0;
+  for (std::string row; std::getline(timing, row); ++rows) {
+    EXPECT_EQ(std::count(row.begin(), row.end(), ','), columns) << row;
+    std::stringstream fields(row);
+    for (std::string field; std::getline(fields, field, ',');) {
+      char* end = nullptr;
+      std::strtod(field.c_str(), &end);
+      EXPECT_TRUE(!field.empty() && *end == '\0') << "not a number: '" << field << "' in " << row;
+    }
+  }
+  EXPECT_EQ(rows, static_cast<int>(kinds.size()));
   const auto poses = ReadTrajectory(options.out_dir / "poses.txt");
   int with_pose = 0;
   for (const auto& f : frames) with_pose += f.room_from_model.has_value();
