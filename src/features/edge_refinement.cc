@@ -861,4 +861,16 @@ CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
   return RefineMarkerCorners(gray, initial_px, options, PixelUndistorter(), &workspace);
 }
 
+void ApplyRefinement(const CornerRefinementResult& r, MarkerObservation* obs) {
+  obs->status = r.status;
+  obs->corners_px = r.corners_px;
+  obs->corner_sigma_px = r.corner_sigma_px;
+  obs->edge_fit_rms_px = r.edge_fit_rms_px;
+  obs->max_segment_offset_px = r.max_segment_offset_px;
+  obs->edge_inlier_fraction = r.edge_inlier_fraction;
+  obs->contrast_grey = r.contrast_grey;
+  obs->blur_sigma_px = r.blur_sigma_px;
+  obs->noise_sigma_grey = r.noise_sigma_grey;
+}
+
 }  // namespace arpos

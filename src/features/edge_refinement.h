@@ -211,6 +211,10 @@ CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
                                            const PixelUndistorter& undistorter,
                                            EdgeRefinementWorkspace* workspace);
 
+/// Copies a refinement's outcome into an observation: status, corners, their
+/// sigmas and the fit's quality figures (id and detected corners untouched).
+void ApplyRefinement(const CornerRefinementResult& refinement, MarkerObservation* observation);
+
 /// Convenience overload: identity undistorter, temporary workspace.
 CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
                                            const std::array<Eigen::Vector2d, 4>& initial_px,

@@ -181,17 +181,7 @@ void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>
     for (int i = 0; i < n; ++i) {
       MarkerObservation& obs = (*observations)[i];
       EdgeRefinementWorkspace& ws = *m.workspaces[omp_get_thread_num()];
-      const CornerRefinementResult r =
-          RefineMarkerCorners(*gray, obs.detected_corners_px, m.edge, m.undistorter, &ws);
-      obs.status = r.status;
-      obs.corners_px = r.corners_px;
-      obs.corner_sigma_px = r.corner_sigma_px;
-      obs.edge_fit_rms_px = r.edge_fit_rms_px;
-      obs.max_segment_offset_px = r.max_segment_offset_px;
-      obs.edge_inlier_fraction = r.edge_inlier_fraction;
-      obs.contrast_grey = r.contrast_grey;
-      obs.blur_sigma_px = r.blur_sigma_px;
-      obs.noise_sigma_grey = r.noise_sigma_grey;
+      ApplyRefinement(RefineMarkerCorners(*gray, obs.detected_corners_px, m.edge, m.undistorter, &ws), &obs);
     }
     if (!options_.keep_unreliable) {
       observations->erase(std::remove_if(observations->begin(), observations->end(),

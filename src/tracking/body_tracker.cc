@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <ctime>
 #include <cmath>
 #include <deque>
 #include <limits>
@@ -12,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
+#include "geometry/so3.h"
 #include "registration/mesh_cloud.h"
 #include "util/check.h"
 #include "util/logging.h"
@@ -71,21 +71,11 @@ using Clock = std::chrono::steady_clock;
 double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 // The last pose predicts the next frame for at most this long (s).
 constexpr double kPredictionMaxAgeS = 0.5;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
-Eigen::Matrix3d Skew(const Eigen::Vector3d& p) {
-  Eigen::Matrix3d s;
-  s << 0, -p.z(), p.y(), p.z(), 0, -p.x(), -p.y(), p.x(), 0;
-  return s;
-}
 
 // A sticker seen in this frame: corners in normalised ideal coordinates.
 struct SeenSticker {
@@ -102,15 +92,7 @@ MarkerObservation Refined(int id, const std::array<Eigen::Vector2d, 4>& initial,
   MarkerObservation out;
   out.id = id;
   out.detected_corners_px = initial;
-  out.status = r.status;
-  out.corners_px = r.corners_px;
-  out.corner_sigma_px = r.corner_sigma_px;
-  out.edge_fit_rms_px = r.edge_fit_rms_px;
-  out.max_segment_offset_px = r.max_segment_offset_px;
-  out.edge_inlier_fraction = r.edge_inlier_fraction;
-  out.contrast_grey = r.contrast_grey;
-  out.blur_sigma_px = r.blur_sigma_px;
-  out.noise_sigma_grey = r.noise_sigma_grey;
+  ApplyRefinement(r, &out);
   return out;
 }
 
@@ -145,17 +127,8 @@ struct BodyTracker::Impl {
   std::vector<int> visible;
   std::vector<float> zbuffer;
 
-  Eigen::Vector2d Distort(const Eigen::Vector2d& n) const {
-    if (!distorted) return n;
-    const auto& d = K.distortion;
-    const double x = n.x(), y = n.y(), r2 = x * x + y * y;
-    const double radial = 1 + d[0] * r2 + d[1] * r2 * r2 + d[4] * r2 * r2 * r2;
-    return {x * radial + 2 * d[2] * x * y + d[3] * (r2 + 2 * x * x),
-            y * radial + d[2] * (r2 + 2 * y * y) + 2 * d[3] * x * y};
-  }
   Eigen::Vector2d PixelOf(const Eigen::Vector3d& p) const {
-    const Eigen::Vector2d n = Distort(Eigen::Vector2d(p.x() / p.z(), p.y() / p.z()));
-    return {K.fx * n.x() + K.cx, K.fy * n.y() + K.cy};
+    return undistorter.Distort(Eigen::Vector2d(K.fx * p.x() / p.z() + K.cx, K.fy * p.y() / p.z() + K.cy));
   }
   Eigen::Vector2d RayOf(int u, int v) const {
     if (!distorted) return {(u - K.cx) / K.fx, (v - K.cy) / K.fy};
@@ -426,7 +399,6 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   // for ArUco when the sticker is small, corners refined on the frame
   // itself), else in the whole image.
   const auto t_detect = Clock::now();
-  const double cpu_detect = ThreadCpuMs();
   cv::cvtColor(frame.color, m.gray, cv::COLOR_BGR2GRAY);
   std::vector<MarkerObservation> found;
   if (predicted) m.SearchAround(*predicted, o, &found);
@@ -526,7 +498,6 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   }
   result.timings.detection_ms = MsSince(t_detect);
   const auto t_pose = Clock::now();
-  const double cpu_pose = ThreadCpuMs();
   ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
                             << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
   if (!start_pose) {
@@ -704,7 +675,6 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   const double inlier_fraction = depth_candidates ? static_cast<double>(depth_inliers) / depth_candidates : 0;
   const bool surface_ok = depth_inliers >= o.min_depth_inliers && inlier_fraction >= o.min_depth_inlier_fraction;
 
-  ARPOS_DEBUG("body frame " << frame.index << ": cpu detect " << cpu_pose - cpu_detect << " ms, pose " << ThreadCpuMs() - cpu_pose << " ms");
   ARPOS_DEBUG("body frame " << frame.index << ": " << n_stickers << " stickers (rms " << result.sticker_rms_px
                             << " px), depth " << depth_inliers << "/" << depth_candidates << " inliers, rms "
                             << result.depth_rms_mm << " mm");
