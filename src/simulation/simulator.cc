@@ -562,6 +562,7 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
       all.insert(all.begin() + static_cast<std::ptrdiff_t>(best), views[0]);
     }
     room->camera = HandheldTrajectory(all, duration, trajectory_seed);
+    room->camera.PaceLikeAWalk();
     origin_visibility_ = MeasureOriginVisibility(*room);
     const bool too_often = visibility == "poor" && attempt < 10 && origin_visibility_.visible_frames > poor_at_most;
     if (origin_visibility_.visible_frames >= needed && !too_often) break;

@@ -53,7 +53,7 @@ namespace arpos::sim {
 
 /// Changes whenever the same options and seed render different bytes
 /// (scene, trajectories, sensor models); caches of simulated cases key on it.
-inline constexpr int kSimulatorVersion = 2;
+inline constexpr int kSimulatorVersion = 3;
 
 struct SimulationOptions {
   std::string profile = "xtion";  ///< xtion | l515

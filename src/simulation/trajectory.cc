@@ -55,16 +55,53 @@ HandheldTrajectory::HandheldTrajectory(std::vector<CameraKey> keys, double durat
   }
 }
 
+void HandheldTrajectory::PaceLikeAWalk(double walk_m_per_s, double turn_deg_per_s) {
+  ARPOS_CHECK(walk_m_per_s > 0 && turn_deg_per_s > 0, "walking pace must be positive");
+  key_views_.clear();
+  for (size_t k = 0; k < keys_.size(); ++k) {
+    const Eigen::Vector3d d = keys_[k].look_at_m - keys_[k].position_m;
+    double heading = std::atan2(d.y(), d.x());
+    if (k > 0) {  // unwrapped: the shorter way round from the previous key
+      const double previous = key_views_.back().x();
+      heading = previous + std::remainder(heading - previous, 2 * M_PI);
+    }
+    key_views_.emplace_back(heading, std::atan2(d.z(), d.head<2>().norm()), d.norm());
+  }
+  std::vector<double> effort = {0.0};
+  for (size_t k = 1; k < keys_.size(); ++k) {
+    const double distance = (keys_[k].position_m - keys_[k - 1].position_m).norm();
+    const Eigen::Vector3d turn = key_views_[k] - key_views_[k - 1];
+    const double turn_deg = DegFromRad(std::hypot(turn.x(), turn.y()));
+    effort.push_back(effort.back() + distance / walk_m_per_s + turn_deg / turn_deg_per_s + 1e-3);
+  }
+  key_times_s_.clear();
+  for (double e : effort) key_times_s_.push_back(e / effort.back() * duration_s_);
+}
+
 Rigid3d HandheldTrajectory::RoomFromCamera(double t_s) const {
   const double t = std::clamp(t_s, 0.0, duration_s_);
-  const double s = t / duration_s_ * (keys_.size() - 1);
-  const int i = std::min(static_cast<int>(s), static_cast<int>(keys_.size()) - 2);
-  const double f = s - i;
+  int i = 0;
+  double f = 0;
+  if (key_times_s_.empty()) {
+    const double s = t / duration_s_ * (keys_.size() - 1);
+    i = std::min(static_cast<int>(s), static_cast<int>(keys_.size()) - 2);
+    f = s - i;
+  } else {
+    while (i + 2 < static_cast<int>(keys_.size()) && t >= key_times_s_[i + 1]) ++i;
+    f = std::clamp((t - key_times_s_[i]) / (key_times_s_[i + 1] - key_times_s_[i]), 0.0, 1.0);
+  }
   auto key = [&](int k) { return keys_[std::clamp(k, 0, static_cast<int>(keys_.size()) - 1)]; };
   const Eigen::Vector3d position = CatmullRom(key(i - 1).position_m, key(i).position_m,
                                               key(i + 1).position_m, key(i + 2).position_m, f);
-  const Eigen::Vector3d look = CatmullRom(key(i - 1).look_at_m, key(i).look_at_m,
-                                          key(i + 1).look_at_m, key(i + 2).look_at_m, f);
+  Eigen::Vector3d look;
+  if (key_views_.empty()) {
+    look = CatmullRom(key(i - 1).look_at_m, key(i).look_at_m, key(i + 1).look_at_m, key(i + 2).look_at_m, f);
+  } else {
+    auto view = [&](int k) { return key_views_[std::clamp(k, 0, static_cast<int>(key_views_.size()) - 1)]; };
+    const Eigen::Vector3d v = CatmullRom(view(i - 1), view(i), view(i + 1), view(i + 2), f);
+    look = position + v.z() * Eigen::Vector3d(std::cos(v.y()) * std::cos(v.x()),
+                                              std::cos(v.y()) * std::sin(v.x()), std::sin(v.y()));
+  }
   double v[7];
   for (int axis = 0; axis < 7; ++axis) {
     v[axis] = 0;

@@ -30,12 +30,23 @@ class HandheldTrajectory {
   Rigid3d RoomFromCamera(double t_s) const;
   double duration_s() const { return duration_s_; }
 
+  /// Paces the keys like a person walking with the camera instead of evenly:
+  /// each key is reached after a time in proportion to the way there (the
+  /// distance at `walk_m_per_s` plus the turn of the view at
+  /// `turn_deg_per_s`), the whole still lasting duration_s; and the view
+  /// turns by heading and elevation, as a person turns, instead of swinging
+  /// its look-at point through the camera when two keys look opposite ways.
+  void PaceLikeAWalk(double walk_m_per_s = 0.8, double turn_deg_per_s = 60.0);
+
  private:
   struct Wave {
     double frequency_hz, phase, amplitude;
   };
   std::vector<CameraKey> keys_;
   double duration_s_ = 1;
+  std::vector<double> key_times_s_;  ///< empty: keys evenly spaced
+  /// Per key when paced: heading (unwrapped), elevation (rad), look distance (m).
+  std::vector<Eigen::Vector3d> key_views_;
   std::vector<Wave> waves_[7];  // tx ty tz rx ry rz roll
 };
 

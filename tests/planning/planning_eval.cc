@@ -151,6 +151,11 @@ int main(int argc, char** argv) {
       const TrajectoryEvaluation e = EvaluateTrajectory(*room.CameraGroundTruth(), est);
       std::cout << StringPrintf("room frames (bundle adjusted): MTE %.3f mm, MRE %.4f deg, max %.3f mm, lost %.1f %%\n",
                                 e.translation_mm.mean, e.rotation_deg.mean, e.translation_mm.max, e.lost_percent);
+      if (std::getenv("FRAME_ERRORS")) {
+        for (const FrameError& f : e.frames) {
+          std::cout << StringPrintf("  room frame at %.3f s: %.2f mm %.3f deg\n", f.timestamp_s, f.error.translation_mm, f.error.rotation_deg);
+        }
+      }
     }
 
     if (std::getenv("TRUTH_MARKERS")) {

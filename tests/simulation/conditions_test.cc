@@ -557,6 +557,40 @@ TEST(RandomConditions, EveryCaseSeesItsOriginMarkerAndRecordsItsConditions) {
   EXPECT_GE(poor_checked, 2);
 }
 
+// A room walk moves at a hand-held pace: with keys evenly spaced in time and
+// the look-at point swung through the camera, the origin's views sent the
+// camera across the room in one frame interval and whipped it round at up to
+// 3200 deg/s (120-175 deg between frames of a 60-frame walk); frames shared
+// no view and `arpos plan` could not link the origin to the rest. Now each
+// key gets time for the way there and the view turns by heading (measured
+// on seeds 1-10: at most 170 deg/s and 3.2 m/s; the walk's duration is drawn
+// short for a whole-room walk, so it is brisk).
+TEST(RandomConditions, RoomWalksTurnAndMoveAtAHandHeldPace) {
+  double worst_turn_deg = 0, worst_speed = 0;
+  for (uint64_t seed = 1; seed <= 10; ++seed) {
+    SimulationOptions o = SmallOptions();
+    o.seed = seed;
+    o.room_frames = 60;
+    o.random_conditions = true;
+    const Simulator sim(o);
+    const SequencePlan& room = sim.sequences().front();
+    ASSERT_EQ(room.name, "room");
+    // Sampled finely: the fastest turn and walk anywhere along the path.
+    const double dt = 0.05;
+    const double duration = room.camera.duration_s();
+    for (double t = 0; t + dt <= duration; t += dt) {
+      const Rigid3d a = room.camera.RoomFromCamera(t), b = room.camera.RoomFromCamera(t + dt);
+      const double turn = DegFromRad(a.rotation.angularDistance(b.rotation)) / dt;
+      const double speed = (b.translation - a.translation).norm() / dt;
+      worst_turn_deg = std::max(worst_turn_deg, turn);
+      worst_speed = std::max(worst_speed, speed);
+      EXPECT_LT(turn, 240) << "seed " << seed << " at " << t << " s";
+      EXPECT_LT(speed, 3.5) << "seed " << seed << " at " << t << " s";
+    }
+  }
+  std::printf("fastest turn %.0f deg/s, fastest walk %.2f m/s over 10 seeds\n", worst_turn_deg, worst_speed);
+}
+
 TEST(RandomConditions, AMovedOriginMarkerDefinesTheRoomFrame) {
   // Exact renders of room frames that see the origin marker on a wall (or
   // far on the floor): marker 0 is detected where its corners in the room
