@@ -10,7 +10,7 @@ BUILD_DIR=${BUILD_DIR:-build}
 
 PACKAGES="build-essential cmake ninja-build ccache pkg-config git
   qtbase5-dev libvtk9-dev libvtk9-qt-dev libopencv-dev libopencv-contrib-dev
-  libpcl-dev libeigen3-dev libsqlite3-dev sqlite3 libassimp-dev libceres-dev
+  libpcl-dev libeigen3-dev libsqlite3-dev sqlite3 libssl-dev libassimp-dev libceres-dev
   libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev
   libgdcm-dev libvtkgdcm-dev
   xvfb xauth libgl1-mesa-dri"

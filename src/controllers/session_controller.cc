@@ -238,6 +238,8 @@ ManualAlignmentResult AlignStoredReconstruction(Database* database, Reconstructi
     manual.num_inliers = static_cast<std::int64_t>(model_points.size());
     manual.options = StringPrintf("picked point pairs: %zu, rmse %.2f mm", model_points.size(), 1000 * fit->rmse_m);
     out.manual_id = database->AddAlignment(manual);
+    database->AppendAudit({AuditId(), 0, actor, "add_alignment", "alignment:" + std::to_string(out.manual_id.value()),
+                           "manual: " + manual.options});
     AlignmentRecord icp;
     icp.reconstruction_id = reconstruction_id;
     icp.parent_alignment_id = out.manual_id;
@@ -748,6 +750,9 @@ void SessionController::Run() {
     initial.options = options_.initial_alignment ? "file: " + options_.initial_alignment->string()
                                                  : "global registration, target-pose prior";
     const AlignmentId initial_id = database_->AddAlignment(initial);
+    database_->AppendAudit({AuditId(), 0, options_.actor, "add_alignment",
+                            "alignment:" + std::to_string(initial_id.value()),
+                            result_.alignment_method + " (the start of the ICP refinement that follows)"});
     AlignmentRecord icp;
     icp.reconstruction_id = result_.reconstruction_id;
     icp.parent_alignment_id = initial_id;

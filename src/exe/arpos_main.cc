@@ -67,6 +67,7 @@ const std::vector<Command>& Commands() {
        arpos::RunEvaluateCommand},
 #ifdef ARPOS_HAVE_STORE
       {"store", "inspect the session store (store info)", arpos::RunStoreCommand},
+      {"audit", "check the audit log's hash chain and coverage (audit verify)", arpos::RunAuditCommand},
 #endif
   };
   return commands;

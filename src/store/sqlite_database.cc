@@ -936,17 +936,33 @@ std::vector<TrackingFrameRecord> SqliteDatabase::GetTrackingFrames(TrackingRunId
 AuditId SqliteDatabase::AppendAudit(const AuditEntry& entry) {
   ARPOS_CHECK(!entry.actor.empty() && !entry.action.empty(),
               "an audit entry needs an actor and an action");
+  // The next id and the last entry's hash under the write lock, so the
+  // entry's hash covers its final id (store/audit_chain.h).
+  SqliteTransaction transaction(db_);
+  AuditEntry e = entry;
+  e.time_unix_ms = OrNow(entry.time_unix_ms);
+  e.id = AuditId(QueryInt64(db_,
+                            "SELECT MAX(COALESCE((SELECT seq FROM sqlite_sequence WHERE name = 'audit_log'), 0), "
+                            "COALESCE((SELECT MAX(audit_id) FROM audit_log), 0)) + 1"));
+  const std::string prev_hash =
+      QueryText(db_, "SELECT COALESCE((SELECT entry_hash FROM audit_log ORDER BY audit_id DESC LIMIT 1), '')");
   SqliteStatementGuard s(
-      Prepared("INSERT INTO audit_log (time_unix_ms, actor, action, entity, details) "
-               "VALUES (?1, ?2, ?3, ?4, ?5)"));
-  s->BindInt64(1, OrNow(entry.time_unix_ms));
-  s->BindText(2, entry.actor);
-  s->BindText(3, entry.action);
-  s->BindText(4, entry.entity);
-  s->BindText(5, entry.details);
+      Prepared("INSERT INTO audit_log (audit_id, time_unix_ms, actor, action, entity, details, prev_hash, "
+               "entry_hash) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"));
+  s->BindId(1, e.id);
+  s->BindInt64(2, e.time_unix_ms);
+  s->BindText(3, e.actor);
+  s->BindText(4, e.action);
+  s->BindText(5, e.entity);
+  s->BindText(6, e.details);
+  s->BindText(7, prev_hash);
+  s->BindText(8, AuditEntryHash(e, prev_hash));
   s->Execute();
-  return AuditId(LastInsertRowId());
+  transaction.Commit();
+  return e.id;
 }
+
+AuditVerification SqliteDatabase::VerifyAudit() { return VerifyAuditLog(db_); }
 
 std::vector<AuditEntry> SqliteDatabase::ListAudit(AuditId after, std::size_t limit) {
   SqliteStatementGuard s(

@@ -23,6 +23,7 @@
 #include <string>
 #include <unordered_map>
 
+#include "store/audit_chain.h"
 #include "store/database.h"
 
 struct sqlite3;
@@ -103,6 +104,8 @@ class SqliteDatabase final : public Database {
 
   AuditId AppendAudit(const AuditEntry& entry) override;
   std::vector<AuditEntry> ListAudit(AuditId after = AuditId(), std::size_t limit = 0) override;
+  /// The audit log's hash chain, triggers and coverage (store/audit_chain.h).
+  AuditVerification VerifyAudit();
 
  private:
   SqliteDatabase(sqlite3* db, std::string path);

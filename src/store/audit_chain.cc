@@ -1,0 +1,207 @@
+#include "store/audit_chain.h"
+
+#include <openssl/evp.h>
+#include <sqlite3.h>
+
+#include <cctype>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "store/sqlite_util.h"
+#include "util/check.h"
+#include "util/string_util.h"
+
+namespace arpos {
+namespace {
+
+// Each field as "<length>:<bytes>\n": unambiguous whatever the text holds.
+void AppendField(std::string* out, const std::string& field) {
+  *out += std::to_string(field.size());
+  *out += ':';
+  *out += field;
+  *out += '\n';
+}
+
+std::string Sha256Hex(const std::string& data) {
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  ARPOS_CHECK(EVP_Digest(data.data(), data.size(), digest, &length, EVP_sha256(), nullptr) == 1,
+              "SHA-256 failed");
+  static const char* kHex = "0123456789abcdef";
+  std::string hex;
+  for (unsigned int i = 0; i < length; ++i) {
+    hex += kHex[digest[i] >> 4];
+    hex += kHex[digest[i] & 15];
+  }
+  return hex;
+}
+
+// Whitespace runs as one space, for comparing a trigger's SQL with the schema's.
+std::string Normalised(const std::string& sql) {
+  std::string out;
+  bool space = false;
+  for (char c : sql) {
+    if (std::isspace(static_cast<unsigned char>(c))) {
+      space = !out.empty();
+      continue;
+    }
+    if (space) out += ' ';
+    space = false;
+    out += c;
+  }
+  return out;
+}
+
+// The append-only triggers exactly as schema/0001_initial.sql creates them.
+const std::map<std::string, std::string>& ExpectedTriggers() {
+  static const std::map<std::string, std::string> triggers = {
+      {"audit_log_refuse_replace",
+       "CREATE TRIGGER audit_log_refuse_replace BEFORE INSERT ON audit_log WHEN EXISTS (SELECT 1 FROM "
+       "audit_log WHERE audit_id = NEW.audit_id) BEGIN SELECT RAISE(ABORT, 'audit_log is append-only: an "
+       "existing entry cannot be replaced'); END"},
+      {"audit_log_refuse_update",
+       "CREATE TRIGGER audit_log_refuse_update BEFORE UPDATE ON audit_log BEGIN SELECT RAISE(ABORT, "
+       "'audit_log is append-only: UPDATE refused'); END"},
+      {"audit_log_refuse_delete",
+       "CREATE TRIGGER audit_log_refuse_delete BEFORE DELETE ON audit_log BEGIN SELECT RAISE(ABORT, "
+       "'audit_log is append-only: DELETE refused'); END"},
+  };
+  return triggers;
+}
+
+// Clinical tables, their id column, and the entity prefix of the audit entry
+// that records each row's creation.
+struct AuditedTable {
+  const char* table;
+  const char* id_column;
+  const char* entity;
+};
+constexpr AuditedTable kAuditedTables[] = {
+    {"patients", "patient_id", "patient"},
+    {"plans", "plan_id", "plan"},
+    {"room_maps", "room_map_id", "room_map"},
+    {"sessions", "session_id", "session"},
+    {"body_marker_maps", "body_marker_map_id", "body_marker_map"},
+    {"reconstructions", "reconstruction_id", "reconstruction"},
+    {"alignments", "alignment_id", "alignment"},
+    {"tracking_runs", "tracking_run_id", "tracking_run"},
+};
+
+}  // namespace
+
+std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash) {
+  std::string data = "arpos-audit-1\n";
+  AppendField(&data, std::to_string(entry.id.value()));
+  AppendField(&data, std::to_string(entry.time_unix_ms));
+  AppendField(&data, entry.actor);
+  AppendField(&data, entry.action);
+  AppendField(&data, entry.entity);
+  AppendField(&data, entry.details);
+  AppendField(&data, prev_hash);
+  return Sha256Hex(data);
+}
+
+std::string AuditVerification::ToText() const {
+  std::ostringstream out;
+  out << StringPrintf("audit log: %d entries, %d verified in the hash chain", entries, chained_entries);
+  if (legacy_entries > 0) {
+    out << StringPrintf(", %d written before the chain existed (schema < 6; not verifiable)", legacy_entries);
+  }
+  out << "\n";
+  if (problems.empty()) {
+    out << "verified: the chain is intact, the append-only triggers are in place, no entry is missing "
+           "at the end, and every plan, session, map, alignment and tracking run has its audit entry\n";
+  } else {
+    out << "NOT verified: " << problems.size() << " problem(s), the first first:\n";
+    for (const std::string& p : problems) out << "  " << p << "\n";
+  }
+  return out.str();
+}
+
+AuditVerification VerifyAuditLog(sqlite3* db) {
+  AuditVerification v;
+  std::set<std::string> entities;
+  // The chain, in id order.
+  {
+    SqliteStatement s(db,
+                      "SELECT audit_id, time_unix_ms, actor, action, entity, details, prev_hash, entry_hash "
+                      "FROM audit_log ORDER BY audit_id");
+    std::string previous_hash;
+    bool chain_started = false;
+    while (s.Step()) {
+      AuditEntry e;
+      e.id = AuditId(s.ColumnInt64(0));
+      e.time_unix_ms = s.ColumnInt64(1);
+      e.actor = s.ColumnText(2);
+      e.action = s.ColumnText(3);
+      e.entity = s.ColumnText(4);
+      e.details = s.ColumnText(5);
+      const std::string prev_hash = s.ColumnText(6), entry_hash = s.ColumnText(7);
+      ++v.entries;
+      entities.insert(e.entity);
+      const std::string where = StringPrintf("audit entry %lld (%s %s by %s)", static_cast<long long>(e.id.value()),
+                                             e.action.c_str(), e.entity.c_str(), e.actor.c_str());
+      if (entry_hash.empty() && prev_hash.empty() && !chain_started) {
+        ++v.legacy_entries;  // before schema 6: a prefix of the log
+        continue;
+      }
+      if (entry_hash.empty()) {
+        v.problems.push_back(where + ": has no hash, but entries before it are chained (inserted outside the program)");
+      } else if (prev_hash != previous_hash) {
+        v.problems.push_back(where + ": its previous hash does not match the entry before it (an entry was "
+                                     "removed, inserted or changed before it)");
+      } else if (AuditEntryHash(e, prev_hash) != entry_hash) {
+        v.problems.push_back(where + ": its content does not match its hash (changed after it was written)");
+      } else {
+        ++v.chained_entries;
+      }
+      chain_started = true;
+      previous_hash = entry_hash;
+    }
+  }
+  // Entries removed from the end: the AUTOINCREMENT counter remembers.
+  {
+    const std::int64_t max_id = QueryInt64(db, "SELECT COALESCE(MAX(audit_id), 0) FROM audit_log");
+    const std::int64_t sequence =
+        QueryInt64(db, "SELECT COALESCE((SELECT seq FROM sqlite_sequence WHERE name = 'audit_log'), 0)");
+    if (sequence > max_id) {
+      v.problems.push_back(StringPrintf("audit entries %lld-%lld were given out and are gone (removed from the end of the log)",
+                                        static_cast<long long>(max_id + 1), static_cast<long long>(sequence)));
+    }
+  }
+  // The append-only triggers, as the schema made them.
+  {
+    std::map<std::string, std::string> found;
+    SqliteStatement s(db, "SELECT name, sql FROM sqlite_master WHERE type = 'trigger' AND tbl_name = 'audit_log'");
+    while (s.Step()) found[s.ColumnText(0)] = Normalised(s.ColumnText(1));
+    for (const auto& [name, sql] : ExpectedTriggers()) {
+      auto it = found.find(name);
+      if (it == found.end()) {
+        v.problems.push_back("trigger " + name + " is missing: the audit log is no longer append-only");
+      } else if (it->second != sql) {
+        v.problems.push_back("trigger " + name + " differs from the schema's: " + it->second);
+      }
+    }
+  }
+  // Every clinical row has the entry that created it.
+  for (const AuditedTable& t : kAuditedTables) {
+    SqliteStatement s(db, StringPrintf("SELECT %s FROM %s ORDER BY %s", t.id_column, t.table, t.id_column));
+    std::vector<long long> missing;
+    while (s.Step()) {
+      const long long id = s.ColumnInt64(0);
+      if (!entities.count(StringPrintf("%s:%lld", t.entity, id))) missing.push_back(id);
+    }
+    if (!missing.empty()) {
+      std::string ids;
+      for (size_t i = 0; i < missing.size() && i < 10; ++i) ids += (i ? ", " : "") + std::to_string(missing[i]);
+      if (missing.size() > 10) ids += ", ...";
+      v.problems.push_back(StringPrintf("%zu row(s) of %s have no audit entry (%s:<id> for id %s): written outside "
+                                        "the program",
+                                        missing.size(), t.table, t.entity, ids.c_str()));
+    }
+  }
+  return v;
+}
+
+}  // namespace arpos

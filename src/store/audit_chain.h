@@ -1,0 +1,43 @@
+#pragma once
+/// The audit log as a hash chain (schema version 6), and its verification.
+///
+/// Each entry carries entry_hash = SHA-256 over its id, time, actor, action,
+/// entity, details and the previous entry's hash (prev_hash), each field
+/// length-prefixed so that no two different entries serialise alike. An
+/// entry changed, inserted or removed in the middle breaks the chain there;
+/// entries removed from the end are found by SQLite's AUTOINCREMENT counter
+/// (sqlite_sequence), which remembers the largest id ever given. Someone who
+/// can rewrite the whole file can rewrite the whole chain: the chain makes
+/// tampering evident to `arpos audit verify`, it does not prevent it (no
+/// secret key; real authentication is out of scope, README).
+
+#include <string>
+#include <vector>
+
+#include "store/records.h"
+
+struct sqlite3;
+
+namespace arpos {
+
+/// Hex SHA-256 of `entry` (its id and time as stored) chained to `prev_hash`.
+std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash);
+
+struct AuditVerification {
+  int entries = 0;          ///< rows in audit_log
+  int legacy_entries = 0;   ///< written before the chain (schema < 6): not verifiable
+  int chained_entries = 0;  ///< verified links
+  /// What does not match, first problem first; empty = the log verifies.
+  std::vector<std::string> problems;
+  bool ok() const { return problems.empty(); }
+  std::string ToText() const;
+};
+
+/// Checks the chain, that the append-only triggers are in place as the
+/// schema created them, that no entry was removed from the end, and that
+/// every clinical row (patients, plans, room maps, sessions, body marker
+/// maps, reconstructions, alignments, tracking runs) has the audit entry
+/// that created it. Reads only.
+AuditVerification VerifyAuditLog(sqlite3* db);
+
+}  // namespace arpos

@@ -1,0 +1,199 @@
+// The audit log as a hash chain (schema version 6): every entry verifies;
+// an entry changed, inserted, removed in the middle or at the end, a dropped
+// trigger and a clinical row written past the program are each named by
+// `arpos audit verify`; entries from before the chain are counted apart.
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <filesystem>
+#include <sstream>
+
+#include "exe/cmd_store.h"
+#include "store/audit_chain.h"
+#include "store/migrator.h"
+#include "store/sqlite_database.h"
+#include "util/file.h"
+
+namespace arpos {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Runs SQL on a raw connection (as a tool or someone with the file would).
+void RawExec(const fs::path& path, const std::string& sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  char* error = nullptr;
+  const int rc = sqlite3_exec(db, sql.c_str(), nullptr, nullptr, &error);
+  const std::string message = error != nullptr ? error : "";
+  sqlite3_free(error);
+  sqlite3_close(db);
+  ASSERT_EQ(rc, SQLITE_OK) << message << " in " << sql;
+}
+
+// A store with a patient, a plan-like history of audit entries, all written
+// through the program.
+fs::path WriteAuditedStore(const fs::path& dir) {
+  const fs::path path = dir / "store.db";
+  const auto db = SqliteDatabase::Open(path.string());
+  PatientRecord patient;
+  patient.external_id = "P-001";
+  const PatientId id = db->AddPatient(patient);
+  db->AppendAudit({AuditId(), 0, "tech", "add_patient", "patient:" + std::to_string(id.value()), "from a test"});
+  db->AppendAudit({AuditId(), 0, "tech", "note", "", "details with\nnew lines, colons: and 12:34"});
+  db->AppendAudit({AuditId(), 0, "physicist", "approve", "plan:1", ""});
+  db->AppendAudit({AuditId(), 0, "therapist", "note", "", "last"});
+  return path;
+}
+
+AuditVerification Verify(const fs::path& path) {
+  SqliteOpenOptions options;
+  options.create_if_missing = false;
+  return SqliteDatabase::Open(path.string(), options)->VerifyAudit();
+}
+
+fs::path CopyOf(const fs::path& path, const std::string& name) {
+  const fs::path copy = path.parent_path() / name;
+  fs::copy_file(path, copy, fs::copy_options::overwrite_existing);
+  return copy;
+}
+
+TEST(AuditChain, EveryEntryWrittenByTheProgramVerifies) {
+  TempDir dir("arpos_audit");
+  const fs::path path = WriteAuditedStore(dir.path());
+  const AuditVerification v = Verify(path);
+  EXPECT_TRUE(v.ok()) << v.ToText();
+  EXPECT_EQ(v.entries, 4);
+  EXPECT_EQ(v.chained_entries, 4);
+  EXPECT_EQ(v.legacy_entries, 0);
+  // Each entry's hash is the documented function of its content and the
+  // previous hash.
+  const auto db = SqliteDatabase::Open(path.string());
+  const std::vector<AuditEntry> entries = db->ListAudit();
+  ASSERT_EQ(entries.size(), 4u);
+  EXPECT_NE(AuditEntryHash(entries[0], ""), AuditEntryHash(entries[1], ""));
+  AuditEntry changed = entries[1];
+  changed.details += " ";
+  EXPECT_NE(AuditEntryHash(changed, "x"), AuditEntryHash(entries[1], "x"));
+}
+
+TEST(AuditChain, EachKindOfTamperingIsNamed) {
+  TempDir dir("arpos_audit");
+  const fs::path path = WriteAuditedStore(dir.path());
+  auto first_problem = [](const AuditVerification& v) { return v.problems.empty() ? std::string() : v.problems[0]; };
+
+  // An entry's text changed (the update trigger dropped first).
+  fs::path t = CopyOf(path, "changed.db");
+  RawExec(t, "DROP TRIGGER audit_log_refuse_update; UPDATE audit_log SET details = 'nothing' WHERE audit_id = 2");
+  AuditVerification v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(first_problem(v).find("audit entry 2"), std::string::npos) << v.ToText();
+  EXPECT_NE(first_problem(v).find("does not match its hash"), std::string::npos) << v.ToText();
+  EXPECT_NE(v.ToText().find("trigger audit_log_refuse_update is missing"), std::string::npos) << v.ToText();
+
+  // A forged entry appended with a made-up hash.
+  t = CopyOf(path, "forged.db");
+  RawExec(t, "INSERT INTO audit_log (time_unix_ms, actor, action, entity, details, prev_hash, entry_hash) "
+             "VALUES (1, 'someone', 'approve', 'plan:1', '', 'abc', 'def')");
+  v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(first_problem(v).find("audit entry 5 (approve plan:1 by someone)"), std::string::npos) << v.ToText();
+
+  // A forged entry with no hash at all.
+  t = CopyOf(path, "unhashed.db");
+  RawExec(t, "INSERT INTO audit_log (time_unix_ms, actor, action) VALUES (1, 'someone', 'approve')");
+  v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(first_problem(v).find("audit entry 5"), std::string::npos) << v.ToText();
+  EXPECT_NE(first_problem(v).find("has no hash"), std::string::npos) << v.ToText();
+
+  // An entry removed from the middle: the next one no longer links.
+  t = CopyOf(path, "middle.db");
+  RawExec(t, "DROP TRIGGER audit_log_refuse_delete; DELETE FROM audit_log WHERE audit_id = 2");
+  v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(first_problem(v).find("audit entry 3"), std::string::npos) << v.ToText();
+  EXPECT_NE(first_problem(v).find("previous hash does not match"), std::string::npos) << v.ToText();
+
+  // The last entry removed: the AUTOINCREMENT counter remembers it.
+  t = CopyOf(path, "tail.db");
+  RawExec(t, "DROP TRIGGER audit_log_refuse_delete; DELETE FROM audit_log WHERE audit_id = 4");
+  v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(v.ToText().find("audit entries 4-4 were given out and are gone"), std::string::npos) << v.ToText();
+
+  // A trigger replaced by one that lets everything through.
+  t = CopyOf(path, "trigger.db");
+  RawExec(t, "DROP TRIGGER audit_log_refuse_update; CREATE TRIGGER audit_log_refuse_update BEFORE UPDATE ON "
+             "audit_log BEGIN SELECT 1; END");
+  v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(first_problem(v).find("trigger audit_log_refuse_update differs"), std::string::npos) << v.ToText();
+
+  // A clinical row written past the program: no audit entry records it.
+  t = CopyOf(path, "row.db");
+  RawExec(t, "INSERT INTO patients (external_id, created_unix_ms) VALUES ('P-002', 1)");
+  v = Verify(t);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(first_problem(v).find("1 row(s) of patients have no audit entry (patient:<id> for id 2)"),
+            std::string::npos)
+      << v.ToText();
+
+  // The original still verifies.
+  EXPECT_TRUE(Verify(path).ok());
+}
+
+TEST(AuditChain, EntriesFromBeforeTheChainAreCountedApartAndTheChainStartsAfterThem) {
+  TempDir dir("arpos_audit");
+  const fs::path path = dir.path() / "old.db";
+  {
+    sqlite3* raw = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &raw), SQLITE_OK);
+    ASSERT_EQ(MigrateSchema(raw, path.string(), 5), 5);
+    sqlite3_close(raw);
+  }
+  RawExec(path, "INSERT INTO audit_log (time_unix_ms, actor, action) VALUES (1, 'arpos plan', 'old entry'); "
+                "INSERT INTO audit_log (time_unix_ms, actor, action) VALUES (2, 'arpos plan', 'old entry')");
+  {
+    const auto db = SqliteDatabase::Open(path.string());  // migrates to the newest schema
+    db->AppendAudit({AuditId(), 0, "tech", "note", "", "first chained entry"});
+    db->AppendAudit({AuditId(), 0, "tech", "note", "", "second"});
+  }
+  AuditVerification v = Verify(path);
+  EXPECT_TRUE(v.ok()) << v.ToText();
+  EXPECT_EQ(v.legacy_entries, 2);
+  EXPECT_EQ(v.chained_entries, 2);
+  EXPECT_NE(v.ToText().find("2 written before the chain existed"), std::string::npos) << v.ToText();
+  // An unhashed entry after the chain started is not taken for an old one.
+  RawExec(path, "INSERT INTO audit_log (time_unix_ms, actor, action) VALUES (3, 'someone', 'late')");
+  v = Verify(path);
+  EXPECT_FALSE(v.ok()) << v.ToText();
+}
+
+TEST(AuditChain, VerifyCommandExitsZeroOneOrTwo) {
+  TempDir dir("arpos_audit");
+  const fs::path path = WriteAuditedStore(dir.path());
+  std::ostringstream out, err;
+  EXPECT_EQ(RunAuditCommandWithOutput({"verify", "--store", path.string()}, out, err), 0) << err.str();
+  EXPECT_NE(out.str().find("verified: the chain is intact"), std::string::npos) << out.str();
+
+  const fs::path t = CopyOf(path, "changed.db");
+  RawExec(t, "DROP TRIGGER audit_log_refuse_update; UPDATE audit_log SET actor = 'x' WHERE audit_id = 1");
+  std::ostringstream out2, err2;
+  EXPECT_EQ(RunAuditCommandWithOutput({"verify", "--store", t.string()}, out2, err2), 1);
+  EXPECT_NE(out2.str().find("NOT verified"), std::string::npos) << out2.str();
+  EXPECT_NE(out2.str().find("audit entry 1"), std::string::npos) << out2.str();
+
+  std::ostringstream out3, err3;
+  const fs::path missing = dir.path() / "missing.db";
+  EXPECT_EQ(RunAuditCommandWithOutput({"verify", "--store", missing.string()}, out3, err3), 2);
+  EXPECT_FALSE(fs::exists(missing)) << "verify must not create a store";
+  EXPECT_NE(err3.str().find("missing.db"), std::string::npos) << err3.str();
+
+  std::ostringstream out4, err4;
+  EXPECT_EQ(RunAuditCommandWithOutput({"check"}, out4, err4), 2);
+  EXPECT_EQ(RunAuditCommandWithOutput({"verify", "--bogus"}, out4, err4), 2);
+}
+
+}  // namespace
+}  // namespace arpos
