@@ -1,6 +1,7 @@
 #include "exe/cmd_store.h"
 
 #include <iostream>
+#include <optional>
 
 #include "store/describe.h"
 #include "store/sqlite_database.h"
@@ -25,31 +26,40 @@ constexpr const char* kUsage =
 
 bool IsHelp(const std::string& arg) { return arg == "-h" || arg == "--help"; }
 
-int RunInfo(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
-  std::string store_path = DefaultStorePath();
+// The options of `arpos store info` and `arpos audit verify`: --store DB and
+// --help. Returns the exit status when the command is done here (help, a
+// usage error), nullopt to go on with *store_path.
+std::optional<int> ParseStoreOption(const std::vector<std::string>& args, const char* command, const char* usage,
+                                    std::string* store_path, std::ostream& out, std::ostream& err) {
+  *store_path = DefaultStorePath();
   for (std::size_t i = 1; i < args.size(); ++i) {
     const std::string& arg = args[i];
     if (IsHelp(arg)) {
-      out << kUsage;
+      out << usage;
       return 0;
     } else if (arg == "--store") {
       if (i + 1 >= args.size()) {
-        err << "arpos store info: --store needs a file name\n" << kUsage;
+        err << command << ": --store needs a file name\n" << usage;
         return 2;
       }
-      store_path = args[++i];
+      *store_path = args[++i];
     } else if (StartsWith(arg, "--store=")) {
-      store_path = arg.substr(std::string("--store=").size());
+      *store_path = arg.substr(std::string("--store=").size());
     } else {
-      err << "arpos store info: unknown argument '" << arg << "'\n" << kUsage;
+      err << command << ": unknown argument '" << arg << "'\n" << usage;
       return 2;
     }
   }
-  if (store_path.empty()) {
-    err << "arpos store info: the store path is empty\n";
+  if (store_path->empty()) {
+    err << command << ": the store path is empty\n";
     return 2;
   }
+  return std::nullopt;
+}
 
+int RunInfo(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+  std::string store_path;
+  if (const auto done = ParseStoreOption(args, "arpos store info", kUsage, &store_path, out, err)) return *done;
   SqliteOpenOptions options;
   options.create_if_missing = false;  // `info` must not leave a new empty store behind
   const std::unique_ptr<SqliteDatabase> database = SqliteDatabase::Open(store_path, options);
@@ -73,28 +83,9 @@ constexpr const char* kAuditUsage =
     "  -h, --help          Show this help.\n";
 
 int RunAuditVerify(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
-  std::string store_path = DefaultStorePath();
-  for (std::size_t i = 1; i < args.size(); ++i) {
-    const std::string& arg = args[i];
-    if (IsHelp(arg)) {
-      out << kAuditUsage;
-      return 0;
-    } else if (arg == "--store") {
-      if (i + 1 >= args.size()) {
-        err << "arpos audit verify: --store needs a file name\n" << kAuditUsage;
-        return 2;
-      }
-      store_path = args[++i];
-    } else if (StartsWith(arg, "--store=")) {
-      store_path = arg.substr(std::string("--store=").size());
-    } else {
-      err << "arpos audit verify: unknown argument '" << arg << "'\n" << kAuditUsage;
-      return 2;
-    }
-  }
-  if (store_path.empty()) {
-    err << "arpos audit verify: the store path is empty\n";
-    return 2;
+  std::string store_path;
+  if (const auto done = ParseStoreOption(args, "arpos audit verify", kAuditUsage, &store_path, out, err)) {
+    return *done;
   }
   SqliteOpenOptions options;
   options.create_if_missing = false;  // verifying must not leave a new empty store behind
