@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cstdlib>
 #include <cmath>
 #include <exception>
 #include <map>
@@ -620,6 +619,14 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
     }
     const double cap = 4 * 10.0 * 10.0;  // px^2 per view: 10 px on every corner
+    auto view_cost = [&](const Rigid3d& room_from_marker, int s2, int m2) {
+      double cost = 0;
+      for (int c = 0; c < 4; ++c) {
+        const Eigen::Vector3d p = frames[s2].camera_from_room * (room_from_marker * marker_corners[c]);
+        cost += p.z() > 0 ? (K.Project(p) - frames[s2].markers[m2].corners_px[c]).squaredNorm() : cap;
+      }
+      return cost;
+    };
     double best_cost = std::numeric_limits<double>::infinity();
     std::optional<Rigid3d> best;
     for (const auto& [s, m] : seen) {
@@ -635,14 +642,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       for (const Rigid3d& camera_from_marker : solutions) {
         const Rigid3d candidate = frames[s].camera_from_room.Inverse() * camera_from_marker;
         double cost = 0;
-        for (const auto& [s2, m2] : seen) {
-          double view_cost = 0;
-          for (int c = 0; c < 4; ++c) {
-            const Eigen::Vector3d p = frames[s2].camera_from_room * (candidate * marker_corners[c]);
-            view_cost += p.z() > 0 ? (K.Project(p) - frames[s2].markers[m2].corners_px[c]).squaredNorm() : cap;
-          }
-          cost += std::min(view_cost, cap);
-        }
+        for (const auto& [s2, m2] : seen) cost += std::min(view_cost(candidate, s2, m2), cap);
         if (cost < best_cost) {
           best_cost = cost;
           best = candidate;
@@ -654,14 +654,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     // all of them, or at least two; the rest are left to the adjustment's
     // outlier test (frames posed through keypoints can be a few px off).
     int explained = 0;
-    for (const auto& [s2, m2] : seen) {
-      double view_cost = 0;
-      for (int c = 0; c < 4; ++c) {
-        const Eigen::Vector3d p = frames[s2].camera_from_room * (*best * marker_corners[c]);
-        view_cost += p.z() > 0 ? (K.Project(p) - frames[s2].markers[m2].corners_px[c]).squaredNorm() : cap;
-      }
-      explained += view_cost <= 4 * 9.0;
-    }
+    for (const auto& [s2, m2] : seen) explained += view_cost(*best, s2, m2) <= 4 * 9.0;
     ARPOS_DEBUG("room marker " << id << " placed from " << seen.size() << " view(s) in placed frames: "
                                << explained << " explained within 3 px");
     if (explained < std::min<int>(2, static_cast<int>(seen.size()))) return std::nullopt;
@@ -705,6 +698,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     if (!changed) break;
   }
   for (const auto& f : frames) {  // with --verbose: how each frame was placed
+    if (GetLogLevel() > LogLevel::kDebug) break;
     std::ostringstream line;
     line << "room frame " << f.index << ": "
          << (f.posed ? (f.posed_by_keypoints ? "placed by keypoints" : "placed by markers") : "not placed")
