@@ -31,6 +31,7 @@
 #include "store/describe.h"
 #include "store/record_conversions.h"
 #include "store/sqlite_database.h"
+#include "store/sqlite_database.h"
 #include "ui/frame_view.h"
 #include "ui/model_view.h"
 #include "ui/worker.h"
@@ -572,7 +573,9 @@ void TrackingPage::ShowFrame(int index) {
 
 AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
   setTitle(tr("Audit"));
-  setSubTitle(tr("Who did what and when: the store's append-only audit log."));
+  setSubTitle(tr("Who did what and when: the store's append-only, hash-chained audit log."));
+  verification_ = new QLabel(this);
+  verification_->setWordWrap(true);
   table_ = new QTableWidget(this);
   table_->setColumnCount(5);
   table_->setHorizontalHeaderLabels({tr("Time (UTC)"), tr("Actor"), tr("Action"), tr("Entity"), tr("Details")});
@@ -581,19 +584,52 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   auto* export_button = new QPushButton(tr("Export report…"), this);
   connect(export_button, &QPushButton::clicked, this, &AuditPage::ExportReport);
   auto* layout = new QVBoxLayout(this);
+  layout->addWidget(verification_);
   layout->addWidget(table_, 1);
   layout->addWidget(export_button, 0, Qt::AlignRight);
 }
 
+std::string AuditPage::Verify() {
+  auto* sqlite = dynamic_cast<SqliteDatabase*>(state_->database.get());
+  if (sqlite == nullptr) {
+    verification_->setText(tr("This store cannot verify its audit log."));
+    verification_->setStyleSheet("");
+    return "audit log: not verifiable in this store\n";
+  }
+  const AuditVerification v = sqlite->VerifyAudit();
+  if (v.ok()) {
+    verification_->setText(tr("Audit log verified: %1 entries in the hash chain%2; the append-only triggers are "
+                              "in place; every plan, session, map, alignment and tracking run has its entry.")
+                               .arg(v.chained_entries)
+                               .arg(v.legacy_entries > 0
+                                        ? tr(" (%1 older entries from before the chain)").arg(v.legacy_entries)
+                                        : QString()));
+    verification_->setStyleSheet("QLabel { background-color: #2e7d32; color: white; padding: 8px; }");
+  } else {
+    verification_->setText(tr("Audit log NOT verified (%1 problem(s)): %2")
+                               .arg(v.problems.size())
+                               .arg(Q(v.problems.front())));
+    verification_->setStyleSheet("QLabel { background-color: #c62828; color: white; padding: 8px; }");
+  }
+  verification_->setToolTip(Q(v.ToText()));
+  return v.ToText();
+}
+
 void AuditPage::initializePage() {
   table_->setRowCount(0);
+  verification_->clear();
   if (!state_->database) return;
+  Verify();
   const auto entries = state_->database->ListAudit();
   table_->setRowCount(static_cast<int>(entries.size()));
   for (int row = 0; row < static_cast<int>(entries.size()); ++row) {
     const auto& e = entries[row];
     const QStringList cells = {Q(FormatUtcTime(e.time_unix_ms)), Q(e.actor), Q(e.action), Q(e.entity), Q(e.details)};
-    for (int c = 0; c < cells.size(); ++c) table_->setItem(row, c, new QTableWidgetItem(cells[c]));
+    for (int c = 0; c < cells.size(); ++c) {
+      auto* item = new QTableWidgetItem(cells[c]);
+      item->setToolTip(cells[c]);  // the whole text where the column cuts it
+      table_->setItem(row, c, item);
+    }
   }
   table_->resizeColumnsToContents();
 }
@@ -603,7 +639,7 @@ void AuditPage::ExportReport() {
                                                     tr("Text (*.txt)"));
   if (path.isEmpty() || !state_->database) return;
   std::ofstream out(path.toStdString());
-  out << DescribeStore(*state_->database, 50) << "\nAudit log\n";
+  out << DescribeStore(*state_->database, 50) << "\n" << Verify() << "\nAudit log\n";
   for (const auto& e : state_->database->ListAudit()) {
     out << FormatUtcTime(e.time_unix_ms) << "  " << e.actor << "  " << e.action << "  " << e.entity << "  "
         << e.details << "\n";

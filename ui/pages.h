@@ -2,6 +2,7 @@
 /// The wizard's pages. Each reads what the store holds when it is shown.
 
 #include <QWizardPage>
+#include <string>
 #include <Eigen/Core>
 #include <vector>
 
@@ -111,7 +112,11 @@ class AuditPage : public QWizardPage {
 
  private:
   void ExportReport();
+  /// Verifies the audit log (store/audit_chain.h), shows the outcome in
+  /// green or red above the table, and returns it as text.
+  std::string Verify();
   WizardState* state_;
+  QLabel* verification_;
   QTableWidget* table_;
 };
 

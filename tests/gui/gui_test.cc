@@ -1,5 +1,6 @@
 // Opens every wizard page of the real executable and looks at what it shows.
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -35,6 +36,7 @@ class GuiTest : public ::testing::Test {
     patient.external_id = "case";
     PlanRecord plan;
     plan.patient_id = database->AddPatient(patient);
+    database->AppendAudit({AuditId(), 0, "gui_test", "add_patient", "patient:1", ""});
     plan.name = "case plan";
     plan.reference_model_name = "reference_model.ply";
     plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}, {0, 0, 0.1f}};
@@ -67,6 +69,42 @@ TEST_F(GuiTest, EveryPageDraws) {
     cv::meanStdDev(shot, mean, stddev);
     EXPECT_GT(stddev[0] + stddev[1] + stddev[2], 10.0) << "page " << page << " is blank";
   }
+}
+
+// The audit page says whether the log verifies: green when it does, red
+// (naming the first problem) once an entry was changed past the program.
+TEST_F(GuiTest, AuditPageShowsWhetherTheLogVerifies) {
+  auto count = [](const cv::Mat& shot, bool green) {
+    int n = 0;
+    for (int y = 0; y < shot.rows; ++y) {
+      for (int x = 0; x < shot.cols; ++x) {
+        const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
+        if (green ? (p[1] > 100 && p[1] > p[2] + 50 && p[1] > p[0] + 50)
+                  : (p[2] > 150 && p[2] > p[1] + 80 && p[2] > p[0] + 80)) {
+          ++n;
+        }
+      }
+    }
+    return n;
+  };
+  const cv::Mat verified = Screenshot(4);
+  ASSERT_FALSE(verified.empty());
+  EXPECT_GT(count(verified, true), 2000) << "no green verification line";
+  EXPECT_LT(count(verified, false), 200);
+  cv::imwrite((dir_.path() / "audit_verified.png").string(), verified);
+  {
+    auto database = SqliteDatabase::Open(store().string());
+    char* error = nullptr;
+    ASSERT_EQ(sqlite3_exec(database->RawHandle(),
+                           "DROP TRIGGER audit_log_refuse_update; UPDATE audit_log SET actor = 'x' WHERE audit_id = 2",
+                           nullptr, nullptr, &error),
+              SQLITE_OK)
+        << (error ? error : "");
+  }
+  const cv::Mat tampered = Screenshot(4);
+  ASSERT_FALSE(tampered.empty());
+  EXPECT_GT(count(tampered, false), 2000) << "no red verification line";
+  EXPECT_LT(count(tampered, true), 200);
 }
 
 TEST_F(GuiTest, PlanningPageRendersTheReferenceModelInBlue) {
