@@ -1,5 +1,6 @@
 #include "ui/pages.h"
 
+#include <QColor>
 #include <QComboBox>
 #include <QFileDialog>
 #include <QFormLayout>
@@ -597,6 +598,7 @@ std::string AuditPage::Verify() {
     return "audit log: not verifiable in this store\n";
   }
   const AuditVerification v = sqlite->VerifyAudit();
+  first_bad_entry_ = v.first_bad_entry;
   if (v.ok()) {
     verification_->setText(tr("Audit log verified: %1 entries in the hash chain%2; the append-only triggers are "
                               "in place; every plan, session, map, alignment and tracking run has its entry.")
@@ -625,11 +627,14 @@ void AuditPage::initializePage() {
   for (int row = 0; row < static_cast<int>(entries.size()); ++row) {
     const auto& e = entries[row];
     const QStringList cells = {Q(FormatUtcTime(e.time_unix_ms)), Q(e.actor), Q(e.action), Q(e.entity), Q(e.details)};
+    const bool bad = e.id.value() == first_bad_entry_;
     for (int c = 0; c < cells.size(); ++c) {
       auto* item = new QTableWidgetItem(cells[c]);
       item->setToolTip(cells[c]);  // the whole text where the column cuts it
+      if (bad) item->setBackground(QColor(255, 205, 205));
       table_->setItem(row, c, item);
     }
+    if (bad) table_->scrollToItem(table_->item(row, 0));
   }
   table_->resizeColumnsToContents();
 }

@@ -2,6 +2,7 @@
 /// The wizard's pages. Each reads what the store holds when it is shown.
 
 #include <QWizardPage>
+#include <cstdint>
 #include <string>
 #include <Eigen/Core>
 #include <vector>
@@ -118,6 +119,7 @@ class AuditPage : public QWizardPage {
   WizardState* state_;
   QLabel* verification_;
   QTableWidget* table_;
+  std::int64_t first_bad_entry_ = 0;  ///< highlighted in the table (0: none)
 };
 
 }  // namespace arpos::ui

@@ -156,6 +156,9 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
       } else {
         ++v.chained_entries;
       }
+      if (v.chained_entries + v.legacy_entries < v.entries && v.first_bad_entry == 0) {
+        v.first_bad_entry = e.id.value();
+      }
       chain_started = true;
       previous_hash = entry_hash;
     }

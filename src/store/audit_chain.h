@@ -11,6 +11,7 @@
 /// tampering evident to `arpos audit verify`, it does not prevent it (no
 /// secret key; real authentication is out of scope, README).
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,8 @@ struct AuditVerification {
   int chained_entries = 0;  ///< verified links
   /// What does not match, first problem first; empty = the log verifies.
   std::vector<std::string> problems;
+  /// The first entry whose link or content does not match (0: none).
+  std::int64_t first_bad_entry = 0;
   bool ok() const { return problems.empty(); }
   std::string ToText() const;
 };

@@ -105,6 +105,15 @@ TEST_F(GuiTest, AuditPageShowsWhetherTheLogVerifies) {
   ASSERT_FALSE(tampered.empty());
   EXPECT_GT(count(tampered, false), 2000) << "no red verification line";
   EXPECT_LT(count(tampered, true), 200);
+  // The changed entry's row is marked (pale red).
+  int marked = 0;
+  for (int y = 0; y < tampered.rows; ++y) {
+    for (int x = 0; x < tampered.cols; ++x) {
+      const cv::Vec3b p = tampered.at<cv::Vec3b>(y, x);
+      marked += p[2] > 240 && std::abs(p[1] - 205) < 12 && std::abs(p[0] - 205) < 12;
+    }
+  }
+  EXPECT_GT(marked, 5000) << "the changed entry's row is not marked";
 }
 
 TEST_F(GuiTest, PlanningPageRendersTheReferenceModelInBlue) {

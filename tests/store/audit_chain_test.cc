@@ -66,6 +66,7 @@ TEST(AuditChain, EveryEntryWrittenByTheProgramVerifies) {
   EXPECT_EQ(v.entries, 4);
   EXPECT_EQ(v.chained_entries, 4);
   EXPECT_EQ(v.legacy_entries, 0);
+  EXPECT_EQ(v.first_bad_entry, 0);
   // Each entry's hash is the documented function of its content and the
   // previous hash.
   const auto db = SqliteDatabase::Open(path.string());
@@ -89,6 +90,7 @@ TEST(AuditChain, EachKindOfTamperingIsNamed) {
   ASSERT_FALSE(v.ok());
   EXPECT_NE(first_problem(v).find("audit entry 2"), std::string::npos) << v.ToText();
   EXPECT_NE(first_problem(v).find("does not match its hash"), std::string::npos) << v.ToText();
+  EXPECT_EQ(v.first_bad_entry, 2);
   EXPECT_NE(v.ToText().find("trigger audit_log_refuse_update is missing"), std::string::npos) << v.ToText();
 
   // A forged entry appended with a made-up hash.
@@ -114,6 +116,7 @@ TEST(AuditChain, EachKindOfTamperingIsNamed) {
   ASSERT_FALSE(v.ok());
   EXPECT_NE(first_problem(v).find("audit entry 3"), std::string::npos) << v.ToText();
   EXPECT_NE(first_problem(v).find("previous hash does not match"), std::string::npos) << v.ToText();
+  EXPECT_EQ(v.first_bad_entry, 3);
 
   // The last entry removed: the AUTOINCREMENT counter remembers it.
   t = CopyOf(path, "tail.db");
