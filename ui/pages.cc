@@ -32,7 +32,6 @@
 #include "store/describe.h"
 #include "store/record_conversions.h"
 #include "store/sqlite_database.h"
-#include "store/sqlite_database.h"
 #include "ui/frame_view.h"
 #include "ui/model_view.h"
 #include "ui/worker.h"
@@ -590,15 +589,13 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   layout->addWidget(export_button, 0, Qt::AlignRight);
 }
 
-std::string AuditPage::Verify() {
-  auto* sqlite = dynamic_cast<SqliteDatabase*>(state_->database.get());
-  if (sqlite == nullptr) {
-    verification_->setText(tr("This store cannot verify its audit log."));
-    verification_->setStyleSheet("");
-    return "audit log: not verifiable in this store\n";
+AuditVerification AuditPage::Verify() {
+  AuditVerification v;
+  if (auto* sqlite = dynamic_cast<SqliteDatabase*>(state_->database.get())) {
+    v = sqlite->VerifyAudit();
+  } else {
+    v.problems.push_back("this store cannot verify its audit log");
   }
-  const AuditVerification v = sqlite->VerifyAudit();
-  first_bad_entry_ = v.first_bad_entry;
   if (v.ok()) {
     verification_->setText(tr("Audit log verified: %1 entries in the hash chain%2; the append-only triggers are "
                               "in place; every plan, session, map, alignment and tracking run has its entry.")
@@ -614,20 +611,20 @@ std::string AuditPage::Verify() {
     verification_->setStyleSheet("QLabel { background-color: #c62828; color: white; padding: 8px; }");
   }
   verification_->setToolTip(Q(v.ToText()));
-  return v.ToText();
+  return v;
 }
 
 void AuditPage::initializePage() {
   table_->setRowCount(0);
   verification_->clear();
   if (!state_->database) return;
-  Verify();
+  const std::int64_t first_bad_entry = Verify().first_bad_entry;
   const auto entries = state_->database->ListAudit();
   table_->setRowCount(static_cast<int>(entries.size()));
   for (int row = 0; row < static_cast<int>(entries.size()); ++row) {
     const auto& e = entries[row];
     const QStringList cells = {Q(FormatUtcTime(e.time_unix_ms)), Q(e.actor), Q(e.action), Q(e.entity), Q(e.details)};
-    const bool bad = e.id.value() == first_bad_entry_;
+    const bool bad = e.id.value() == first_bad_entry;
     for (int c = 0; c < cells.size(); ++c) {
       auto* item = new QTableWidgetItem(cells[c]);
       item->setToolTip(cells[c]);  // the whole text where the column cuts it
@@ -644,7 +641,7 @@ void AuditPage::ExportReport() {
                                                     tr("Text (*.txt)"));
   if (path.isEmpty() || !state_->database) return;
   std::ofstream out(path.toStdString());
-  out << DescribeStore(*state_->database, 50) << "\n" << Verify() << "\nAudit log\n";
+  out << DescribeStore(*state_->database, 50) << "\n" << Verify().ToText() << "\nAudit log\n";
   for (const auto& e : state_->database->ListAudit()) {
     out << FormatUtcTime(e.time_unix_ms) << "  " << e.actor << "  " << e.action << "  " << e.entity << "  "
         << e.details << "\n";

@@ -2,11 +2,10 @@
 /// The wizard's pages. Each reads what the store holds when it is shown.
 
 #include <QWizardPage>
-#include <cstdint>
-#include <string>
 #include <Eigen/Core>
 #include <vector>
 
+#include "store/audit_chain.h"
 #include "store/records.h"
 #include "ui/wizard.h"
 
@@ -114,12 +113,11 @@ class AuditPage : public QWizardPage {
  private:
   void ExportReport();
   /// Verifies the audit log (store/audit_chain.h), shows the outcome in
-  /// green or red above the table, and returns it as text.
-  std::string Verify();
+  /// green or red above the table, and returns it.
+  AuditVerification Verify();
   WizardState* state_;
   QLabel* verification_;
   QTableWidget* table_;
-  std::int64_t first_bad_entry_ = 0;  ///< highlighted in the table (0: none)
 };
 
 }  // namespace arpos::ui
