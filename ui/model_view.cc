@@ -15,6 +15,8 @@
 #include <vtkPolyData.h>
 #include <vtkPolyDataMapper.h>
 #include <vtkPolyDataNormals.h>
+#include <vtkPointData.h>
+#include <vtkUnsignedCharArray.h>
 #include <vtkProperty.h>
 #include <vtkRenderer.h>
 #include <vtkSmartPointer.h>
@@ -57,7 +59,10 @@ ModelView::ModelView(QWidget* parent) : QWidget(parent), impl_(std::make_unique<
 
 void ModelView::PickAt(int x, int y) {
   impl_->click->SetAbortFlag(1);  // a pick, not the start of a camera turn
-  if (!impl_->picker->Pick(x, y, 0, impl_->renderer)) return;
+  if (!impl_->picker->Pick(x, y, 0, impl_->renderer)) {
+    emit PickMissed(QString());
+    return;
+  }
   vtkActor* actor = impl_->picker->GetActor();
   for (const auto& [slot, a] : impl_->actors) {
     if (a.Get() != actor) continue;
@@ -67,12 +72,13 @@ void ModelView::PickAt(int x, int y) {
     emit Picked(QString::fromStdString(slot), room, impl_->room_from_mesh[slot].Inverse() * room);
     return;
   }
+  emit PickMissed(QString());
 }
 
 ModelView::~ModelView() = default;
 
-void ModelView::SetMesh(const std::string& slot, const TriangleMesh& mesh, const Rigid3d& room_from_model,
-                        double r, double g, double b, double opacity) {
+namespace {
+vtkSmartPointer<vtkPolyData> ToPolyData(const TriangleMesh& mesh, const Rigid3d& room_from_model) {
   vtkNew<vtkPoints> points;
   points->SetNumberOfPoints(static_cast<vtkIdType>(mesh.vertices.size()));
   for (size_t i = 0; i < mesh.vertices.size(); ++i) {
@@ -84,9 +90,72 @@ void ModelView::SetMesh(const std::string& slot, const TriangleMesh& mesh, const
     const vtkIdType ids[3] = {f[0], f[1], f[2]};
     polys->InsertNextCell(3, ids);
   }
-  vtkNew<vtkPolyData> poly;
+  auto poly = vtkSmartPointer<vtkPolyData>::New();
   poly->SetPoints(points);
   poly->SetPolys(polys);
+  return poly;
+}
+}  // namespace
+
+void ModelView::SetColoredMesh(const std::string& slot, const TriangleMesh& mesh, const Rigid3d& room_from_model,
+                               const std::vector<std::array<std::uint8_t, 3>>& vertex_rgb, double opacity) {
+  vtkSmartPointer<vtkPolyData> poly = ToPolyData(mesh, room_from_model);
+  if (vertex_rgb.size() == mesh.vertices.size()) {
+    vtkNew<vtkUnsignedCharArray> colours;
+    colours->SetNumberOfComponents(3);
+    colours->SetName("colours");
+    colours->SetNumberOfTuples(static_cast<vtkIdType>(vertex_rgb.size()));
+    for (size_t i = 0; i < vertex_rgb.size(); ++i) {
+      for (int c = 0; c < 3; ++c) colours->SetComponent(static_cast<vtkIdType>(i), c, vertex_rgb[i][c]);
+    }
+    poly->GetPointData()->SetScalars(colours);
+  }
+  vtkNew<vtkPolyDataNormals> normals;
+  normals->SetInputData(poly);
+  normals->SplittingOff();
+  vtkNew<vtkPolyDataMapper> mapper;
+  mapper->SetInputConnection(normals->GetOutputPort());
+  mapper->SetColorModeToDirectScalars();
+  mapper->ScalarVisibilityOn();
+  impl_->room_from_mesh[slot] = room_from_model;
+  auto& actor = impl_->actors[slot];
+  if (actor) impl_->renderer->RemoveActor(actor);
+  actor = vtkSmartPointer<vtkActor>::New();
+  actor->SetMapper(mapper);
+  actor->GetProperty()->SetOpacity(opacity);
+  impl_->renderer->AddActor(actor);
+  impl_->window->Render();
+}
+
+void ModelView::SetPoints(const std::string& slot, const std::vector<Eigen::Vector3d>& points, double r, double g,
+                          double b, double radius_m) {
+  if (points.empty()) {
+    RemoveMesh(slot);
+    return;
+  }
+  TriangleMesh marks;
+  const Eigen::Vector3d axes[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  const int faces[8][3] = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  for (const Eigen::Vector3d& p : points) {
+    const int base = static_cast<int>(marks.vertices.size());
+    for (const auto& a : axes) marks.vertices.push_back((p + radius_m * a).cast<float>());
+    for (const auto& f : faces) marks.faces.emplace_back(base + f[0], base + f[1], base + f[2]);
+  }
+  SetMesh(slot, marks, Rigid3d::Identity(), r, g, b);
+}
+
+void ModelView::RemoveMesh(const std::string& slot) {
+  auto it = impl_->actors.find(slot);
+  if (it == impl_->actors.end()) return;
+  impl_->renderer->RemoveActor(it->second);
+  impl_->actors.erase(it);
+  impl_->room_from_mesh.erase(slot);
+  impl_->window->Render();
+}
+
+void ModelView::SetMesh(const std::string& slot, const TriangleMesh& mesh, const Rigid3d& room_from_model,
+                        double r, double g, double b, double opacity) {
+  vtkSmartPointer<vtkPolyData> poly = ToPolyData(mesh, room_from_model);
   vtkNew<vtkPolyDataNormals> normals;
   normals->SetInputData(poly);
   normals->SplittingOff();

@@ -5,7 +5,10 @@
 
 #include <QWidget>
 #include <QString>
+#include <array>
+#include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "geometry/rigid3.h"
 #include "geometry/triangle_mesh.h"
@@ -22,6 +25,14 @@ class ModelView : public QWidget {
   /// [0, 1]); replaces any mesh with the same `slot` name.
   void SetMesh(const std::string& slot, const TriangleMesh& mesh_in_model,
                const Rigid3d& room_from_model, double r, double g, double b, double opacity = 1.0);
+  /// The same with a colour per vertex (RGB, one per mesh vertex).
+  void SetColoredMesh(const std::string& slot, const TriangleMesh& mesh_in_model, const Rigid3d& room_from_model,
+                      const std::vector<std::array<std::uint8_t, 3>>& vertex_rgb, double opacity = 1.0);
+  /// Small markers (octahedra of `radius_m`) at points in the room, in one slot.
+  void SetPoints(const std::string& slot, const std::vector<Eigen::Vector3d>& points_in_room, double r, double g,
+                 double b, double radius_m = 0.004);
+  /// Removes one slot (no error if it is not shown).
+  void RemoveMesh(const std::string& slot);
   void ClearMeshes();
   /// Shows room axes (x red, y green, z blue) of the given length at the origin.
   void ShowRoomAxes(double length_m);
@@ -33,6 +44,8 @@ class ModelView : public QWidget {
   /// Shift + left click on a mesh: its slot, the point in the room and in
   /// the mesh's own frame (room_from_model^-1 of the point).
   void Picked(QString slot, Eigen::Vector3d point_in_room, Eigen::Vector3d point_in_mesh_frame);
+  /// Shift + left click that hit no mesh (`slot` empty) or hit `slot`.
+  void PickMissed(QString slot);
 
  private:
   void PickAt(int x, int y);

@@ -18,6 +18,7 @@ class QPushButton;
 class QSlider;
 class QTableWidget;
 class QComboBox;
+class QCheckBox;
 
 namespace arpos::ui {
 
@@ -34,7 +35,11 @@ class CasePage : public QWizardPage {
  private:
   void RunCheck();
   void RefreshStore();
+  void RoleChanged();
   WizardState* state_;
+  QLineEdit* user_edit_;
+  QComboBox* role_combo_;
+  QLabel* role_help_;
   QLineEdit* store_edit_;
   QLineEdit* case_edit_;
   QListWidget* problems_;
@@ -50,12 +55,20 @@ class PlanningPage : public QWizardPage {
 
  private:
   void ImportCase();
+  void ApproveShownPlan();
   void ShowLatestPlan();
   void ShowRoomMap(PlanId plan);  ///< the plan's newest room map in the view and the label
+  void UpdateButtons();
   WizardState* state_;
   ModelView* model_view_;
   QLabel* plan_label_;
+  QLabel* approval_label_;
   QPushButton* import_button_;
+  QPushButton* approve_button_;
+  QPushButton* cancel_button_;
+  bool running_here_ = false;  ///< this page started the worker's job (its progress is ours)
+  long long shown_plan_ = 0;
+  bool shown_plan_approvable_ = false;
   QProgressBar* progress_;
 };
 
@@ -71,8 +84,17 @@ class SessionPage : public QWizardPage {
   void RunSessionStage();
   void AlignFromPicks();
   void ShowPicks();
+  void EndShownSession(bool completed);
+  void UpdateButtons();
   WizardState* state_;
   QTableWidget* sessions_;
+  QCheckBox* unapproved_box_;
+  QPushButton* complete_button_;
+  QPushButton* abort_button_;
+  QPushButton* cancel_button_;
+  bool running_here_ = false;
+  long long shown_session_ = 0;
+  bool shown_session_open_ = false;
   ModelView* model_view_;
   QLabel* details_;
   QLabel* stages_;
@@ -85,6 +107,9 @@ class SessionPage : public QWizardPage {
   QPushButton* clear_picks_button_;
   long long shown_reconstruction_ = 0;
   std::vector<Eigen::Vector3d> model_picks_, reconstruction_picks_;
+  std::vector<Eigen::Vector3d> model_picks_room_, reconstruction_picks_room_;  ///< where they are drawn
+  QString pick_note_;  ///< what the last click that did not count hit
+  void ClearPicks();
 };
 
 class TrackingPage : public QWizardPage {

@@ -1,5 +1,7 @@
 #include "ui/wizard.h"
 
+#include <QMessageBox>
+
 #include "store/sqlite_database.h"
 #include "ui/pages.h"
 #include "ui/worker.h"
@@ -33,5 +35,18 @@ ArposWizard::ArposWizard(WizardSettings wizard_options, QWidget* parent)
 }
 
 ArposWizard::~ArposWizard() = default;
+
+void ArposWizard::reject() {
+  if (state_->worker->busy()) {
+    const auto answer = QMessageBox::question(
+        this, tr("A step is running"),
+        tr("A step is still running. Stop it and close ARPos?\n\nWhat it has stored so far stays stored; "
+           "the step itself stores nothing."),
+        QMessageBox::Yes | QMessageBox::No, QMessageBox::No);
+    if (answer != QMessageBox::Yes) return;
+    state_->worker->Cancel();
+  }
+  QWizard::reject();
+}
 
 }  // namespace arpos::ui

@@ -7,6 +7,8 @@
 #include <memory>
 #include <string>
 
+#include "store/roles.h"
+
 namespace arpos {
 class Database;
 }
@@ -18,6 +20,8 @@ class Worker;
 struct WizardSettings {
   std::string store_path;  ///< session store file
   std::string case_dir;    ///< preselected case folder (may be empty)
+  std::string user;        ///< --user / ARPOS_USER (empty: the login name)
+  std::string role;        ///< --role / ARPOS_ROLE (empty: chosen on the first page)
 };
 
 /// State shared by the pages: the open store and the chosen case.
@@ -25,6 +29,9 @@ struct WizardState {
   WizardSettings options;
   std::unique_ptr<Database> database;
   Worker* worker = nullptr;
+  /// Who works at the wizard: chosen on the first page (store/roles.h). Each
+  /// page enables what the role may do; the controllers check it again.
+  Operator op;
   /// (Re)opens the store at options.store_path; returns an error or "".
   std::string OpenStore();
 };
@@ -36,6 +43,9 @@ class ArposWizard : public QWizard {
   explicit ArposWizard(WizardSettings options, QWidget* parent = nullptr);
   ~ArposWizard() override;
   WizardState& state() { return *state_; }
+  /// Escape, Cancel or closing the window: while a step runs, asks first,
+  /// then stops the step (it ends at its next check) and closes.
+  void reject() override;
 
  private:
   std::unique_ptr<WizardState> state_;

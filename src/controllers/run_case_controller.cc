@@ -10,6 +10,7 @@
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
 #include "store/database.h"
+#include "store/lifecycle.h"
 #include "store/record_conversions.h"
 #include "tracking/tracking_stage.h"
 #include "util/logging.h"
@@ -19,7 +20,6 @@ namespace arpos {
 
 std::string RunCaseOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
-  if (actor.empty()) return "actor must not be empty";
   if (const std::string t = tolerances.Validate(); !t.empty()) return "--tolerance-mm/--tolerance-deg: " + t;
   return "";
 }
@@ -47,6 +47,8 @@ RunCaseController::RunCaseController(RunCaseOptions options, Database* database,
 void RunCaseController::Run() {
   const std::string problem = options_.Check();
   if (!problem.empty()) ARPOS_INPUT_ERROR("run-case: " << problem);
+  RequirePermission(options_.op, Action::kRunCase);
+  const std::string actor = options_.op.Actor("arpos run-case");
   ARPOS_CHECK(database_ != nullptr, "run-case needs a session store");
   result_ = RunCaseResult();
 
@@ -75,7 +77,6 @@ void RunCaseController::Run() {
   Step("building the room map", 0.15);
   RoomMapStageOptions map_options;
   map_options.threads = options_.threads;
-  map_options.actor = options_.actor;
   const RoomMapBuildResult room_map = BuildCaseRoomMap(folder, map_options);
 
   Step("storing the plan", 0.4);
@@ -84,11 +85,11 @@ void RunCaseController::Run() {
     if (const std::optional<PatientRecord> patient = database_->FindPatient(case_name)) {
       result_.patient_id = patient->id;
     } else {
-      result_.patient_id = AddCasePatient(database_, folder, case_name, options_.actor);
+      result_.patient_id = AddCasePatient(database_, folder, case_name, actor);
     }
-    result_.plan_id = AddCasePlan(database_, result_.patient_id, folder, model, case_name, options_.actor);
+    result_.plan_id = AddCasePlan(database_, result_.patient_id, folder, model, case_name, actor);
     room_recording = AddRoomRecording(database_, result_.plan_id, folder);
-    result_.room_map_id = StoreRoomMap(database_, result_.plan_id, room_recording, folder, room_map, options_.actor);
+    result_.room_map_id = StoreRoomMap(database_, result_.plan_id, room_recording, folder, room_map, actor);
   });
   result_.recordings.push_back(room_recording);
   result_.frames += static_cast<int>(Sequence::Open(folder.room_dir).size());
@@ -103,7 +104,8 @@ void RunCaseController::Run() {
   session_options.plan_id = result_.plan_id;
   session_options.out_dir = options_.out_dir;
   session_options.threads = options_.threads;
-  session_options.actor = options_.actor;
+  session_options.op = options_.op;
+  session_options.unapproved = true;
   SessionController session(session_options, database_);
   try {
     session.Run();
@@ -115,6 +117,9 @@ void RunCaseController::Run() {
   }
   const SessionStageResult& s = session.result();
   result_.session_id = s.session_id;
+  // Registered as at work on the session until the end: a run-case that dies
+  // leaves the session to be marked aborted by the next command.
+  const SessionActivityGuard activity(database_, s.session_id, "arpos run-case " + folder.root.string());
   result_.recordings.push_back(s.recording_id);
   result_.frames += s.frames;
   result_.session_summary = s.Summary();
@@ -154,7 +159,7 @@ void RunCaseController::Run() {
       if (options_.out_dir) track.out_dir = *options_.out_dir / name;
       track.overlay = options_.out_dir.has_value() && options_.overlay;
       track.tolerances = options_.tolerances;
-      track.actor = options_.actor;
+      track.op = options_.op;
       track.recording_id = tracking_recordings[k].second;
       try {
         TrackSequenceResult r = TrackSequence(database_, inputs, folder.config, track);
@@ -197,6 +202,14 @@ void RunCaseController::Run() {
     }
   }
   result_.evaluation = evaluation.str();
+  if (!options_.keep_session_open) {
+    std::string reason;
+    for (const std::string& f : result_.failures) reason += (reason.empty() ? "" : "; ") + f;
+    EndSession(database_, options_.op, result_.session_id,
+               reason.empty() ? SessionStatus::kCompleted : SessionStatus::kAborted,
+               reason.empty() ? "run-case: every stage done" : "run-case: " + reason);
+    result_.stages_done.push_back(reason.empty() ? "session completed" : "session aborted");
+  }
   Step("done", 1.0);
 }
 

@@ -10,8 +10,13 @@
 /// alignment: SessionController); register the tracking recordings in that
 /// session. Where the case has ground truth, the body-scan camera poses and
 /// the model pose at scan time are evaluated against it (DATASET.md figures).
-/// Then tracking mode on every tracking/<name> (outputs in <out>/<name>/). Every write is logged in the audit
-/// log with `actor`.
+/// Then tracking mode on every tracking/<name> (outputs in <out>/<name>/).
+/// Every write is logged in the audit log with the operator (`op`).
+///
+/// run-case is a research run (store/roles.h): it plans, runs the session on
+/// the plan it just made (not approved: the session is recorded so) and
+/// tracks; a clinical role is refused. At the end the session is completed
+/// (aborted if a tracking run failed), unless `keep_session_open`.
 
 #include <filesystem>
 #include <optional>
@@ -21,6 +26,7 @@
 #include "controllers/controller.h"
 #include "feedback/couch_correction.h"
 #include "store/records.h"
+#include "store/roles.h"
 
 namespace arpos {
 
@@ -29,7 +35,10 @@ class Database;
 struct RunCaseOptions {
   std::filesystem::path case_dir;
   std::string patient_external_id;  ///< empty: the case folder's name
-  std::string actor = "arpos run-case";
+  Operator op;  ///< a research run (no role, or --role research)
+  /// Leave the session open at the end (to track more, e.g. on the GUI's
+  /// positioning screen); otherwise it is completed, or aborted if tracking failed.
+  bool keep_session_open = false;
   bool read_all_images = true;      ///< false: check a sample of the images
   /// Session outputs (model_pose.txt, ...) and, per tracking/<name>, the
   /// tracking outputs in <out_dir>/<name>/ (DATASET.md).

@@ -21,6 +21,7 @@
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
 #include "store/database.h"
+#include "store/lifecycle.h"
 #include "store/record_conversions.h"
 #include "util/file.h"
 #include "util/logging.h"
@@ -112,12 +113,13 @@ std::string SessionStageOptions::Check() const {
   if (poisson_depth < 4 || poisson_depth > 11) return "poisson_depth must be in 4..11";
   if (min_stickers < 1) return "min_stickers must be at least 1";
   if (threads < 1) return "threads must be at least 1";
-  if (actor.empty()) return "actor must not be empty";
   return "";
 }
 
 std::string SessionStageResult::Summary() const {
   std::ostringstream out;
+  if (!plan_choice.empty()) out << "plan: " << plan_choice << "\n";
+  if (on_unapproved_plan) out << "note: the plan is not approved; the session is recorded as such\n";
   const Eigen::Vector3d r_deg = room_from_model.RotationVector() * (180.0 / M_PI);
   out << StringPrintf(
       "session %lld of plan %lld: body scan of %d frames, %d considered: %d localised in the room "
@@ -191,9 +193,11 @@ Rigid3d AnchorCorrection(const std::vector<ReconstructionFrameReport>& reports,
 ManualAlignmentResult AlignStoredReconstruction(Database* database, ReconstructionId reconstruction_id,
                                                 const std::vector<Eigen::Vector3d>& model_points,
                                                 const std::vector<Eigen::Vector3d>& reconstruction_points,
-                                                const std::string& actor, double max_pick_rmse_m,
+                                                const Operator& op, double max_pick_rmse_m,
                                                 int threads) {
   ARPOS_CHECK(database != nullptr, "manual alignment needs a session store");
+  RequirePermission(op, Action::kRunSession);
+  const std::string actor = op.Actor("arpos gui");
   if (model_points.size() != reconstruction_points.size()) {
     ARPOS_INPUT_ERROR("manual alignment: " << model_points.size() << " points on the model but "
                                            << reconstruction_points.size() << " on the reconstruction");
@@ -203,8 +207,9 @@ ManualAlignmentResult AlignStoredReconstruction(Database* database, Reconstructi
   }
   const auto reconstruction = database->GetReconstruction(reconstruction_id);
   if (!reconstruction) ARPOS_INPUT_ERROR("reconstruction " << reconstruction_id.value() << " does not exist");
-  const auto session = database->GetSession(reconstruction->session_id);
-  if (!session) ARPOS_INPUT_ERROR("session " << reconstruction->session_id.value() << " does not exist");
+  const SessionRecord session_record =
+      RequireOpenSession(database, reconstruction->session_id, "a manual alignment");
+  const SessionRecord* session = &session_record;
   const auto plan = database->GetPlan(session->plan_id);
   if (!plan || plan->reference_model.vertices.empty()) {
     ARPOS_INPUT_ERROR("plan " << session->plan_id.value() << " has no reference model");
@@ -265,6 +270,8 @@ void SessionController::Run() {
   const std::string problem = options_.Check();
   if (!problem.empty()) ARPOS_INPUT_ERROR("session: " << problem);
   ARPOS_CHECK(database_ != nullptr, "the session stage needs a session store");
+  RequirePermission(options_.op, Action::kRunSession);
+  const std::string actor = options_.op.Actor("arpos session");
   result_ = SessionStageResult();
   const auto start = Clock::now();
   // What the stage reads, checked as `arpos check` does (quick: a sample of
@@ -278,12 +285,14 @@ void SessionController::Run() {
   Step("loading the case and the plan", 0.0);
   const CaseFolder folder = LoadCaseFolder(options_.case_dir);
   const CameraIntrinsics& camera = folder.config.camera;
-  PlanId plan_id;
+  const bool may_use_unapproved = options_.unapproved || options_.op.role == Role::kResearch;
+  PlanId plan_id = ChoosePlanForSession(database_, options_.plan_id, CasePatientId(folder.root),
+                                        !may_use_unapproved, &result_.plan_choice);
   RoomMapId room_map_id;
-  RoomMap room_map = LoadRoomMapForLocalization(database_, options_.plan_id,
-                                                CasePatientId(folder.root), &plan_id, &room_map_id);
+  RoomMap room_map = LoadRoomMapForLocalization(database_, plan_id, CasePatientId(folder.root), &plan_id, &room_map_id);
   const std::optional<PlanRecord> plan = database_->GetPlan(plan_id);
   if (!plan) ARPOS_INPUT_ERROR("plan " << plan_id.value() << " does not exist");
+  result_.on_unapproved_plan = !plan->approved();
   if (plan->reference_model.vertices.empty()) {
     ARPOS_INPUT_ERROR("plan " << plan_id.value() << " has no reference model");
   }
@@ -693,12 +702,26 @@ void SessionController::Run() {
     SessionRecord session;
     session.plan_id = plan_id;
     session.fraction = static_cast<int>(database_->ListSessions(plan_id).size()) + 1;
-    session.operator_name = options_.actor;
+    session.operator_name = options_.op.Actor();
     session.notes = "session stage on " + folder.root.string();
+    session.on_unapproved_plan = result_.on_unapproved_plan;
+    // The plan's approval as it is when the session opens (inside the
+    // transaction: a plan approved meanwhile is seen).
+    const std::optional<PlanRecord> plan_now = database_->GetPlan(plan_id);
+    if (!plan_now) ARPOS_INPUT_ERROR("plan " << plan_id.value() << " does not exist");
+    if (!plan_now->approved() && !may_use_unapproved) {
+      ARPOS_INPUT_ERROR("plan " << plan_id.value() << " is not approved");
+    }
+    session.on_unapproved_plan = !plan_now->approved();
+    result_.on_unapproved_plan = session.on_unapproved_plan;
     result_.session_id = database_->AddSession(session);
     const std::string session_entity = "session:" + std::to_string(result_.session_id.value());
-    database_->AppendAudit({AuditId(), 0, options_.actor, "open_session", session_entity,
-                            "plan " + std::to_string(plan_id.value())});
+    std::string approval = DescribeApproval(*plan_now);
+    if (!plan_now->approved()) {
+      approval += options_.unapproved ? " (run with --unapproved)" : " (research run)";
+    }
+    database_->AppendAudit({AuditId(), 0, actor, "open_session", session_entity,
+                            "plan " + std::to_string(plan_id.value()) + ", " + approval});
     RecordingRecord recording;
     recording.session_id = result_.session_id;
     recording.kind = RecordingKind::kBodyScan;
@@ -718,7 +741,7 @@ void SessionController::Run() {
     map.mean_residual_px = result_.marker_map.mean_rms_px;
     map.max_residual_px = std::max(result_.marker_map.max_rms_px, map.mean_residual_px);
     result_.body_marker_map_id = database_->AddBodyMarkerMap(map);
-    database_->AppendAudit({AuditId(), 0, options_.actor, "add_body_marker_map",
+    database_->AppendAudit({AuditId(), 0, actor, "add_body_marker_map",
                             "body_marker_map:" + std::to_string(result_.body_marker_map_id.value()),
                             StringPrintf("%zu stickers, mean rms %.3f px, %s", map.markers.size(),
                                          map.mean_residual_px,
@@ -736,7 +759,7 @@ void SessionController::Run() {
     recon.num_frames_used = builder.frames_fused();
     recon.voxel_size_m = recon_options.output_voxel_m;
     result_.reconstruction_id = database_->AddReconstruction(recon);
-    database_->AppendAudit({AuditId(), 0, options_.actor, "add_reconstruction",
+    database_->AppendAudit({AuditId(), 0, actor, "add_reconstruction",
                             "reconstruction:" + std::to_string(result_.reconstruction_id.value()),
                             StringPrintf("%zu points, %zu mesh vertices", body.size(),
                                          mesh.mesh.vertices.size())});
@@ -750,7 +773,7 @@ void SessionController::Run() {
     initial.options = options_.initial_alignment ? "file: " + options_.initial_alignment->string()
                                                  : "global registration, target-pose prior";
     const AlignmentId initial_id = database_->AddAlignment(initial);
-    database_->AppendAudit({AuditId(), 0, options_.actor, "add_alignment",
+    database_->AppendAudit({AuditId(), 0, actor, "add_alignment",
                             "alignment:" + std::to_string(initial_id.value()),
                             result_.alignment_method + " (the start of the ICP refinement that follows)"});
     AlignmentRecord icp;
@@ -763,7 +786,7 @@ void SessionController::Run() {
     icp.num_inliers = refined.num_inliers;
     icp.options = "point-to-plane, reconstruction onto the model surface, gates 30/10/5 mm; status: " + status;
     result_.alignment_id = database_->AddAlignment(icp);
-    database_->AppendAudit({AuditId(), 0, options_.actor, "add_alignment",
+    database_->AppendAudit({AuditId(), 0, actor, "add_alignment",
                             "alignment:" + std::to_string(result_.alignment_id.value()),
                             result_.alignment_method + " + ICP: " + status +
                                 StringPrintf(", rmse %.2f mm", 1000 * refined.rmse_m)});

@@ -41,6 +41,7 @@
 #include "geometry/triangle_mesh.h"
 #include "registration/point_cloud.h"
 #include "store/records.h"
+#include "store/roles.h"
 
 namespace arpos {
 
@@ -50,7 +51,15 @@ inline constexpr int kMinFramesPerStep = 20;
 
 struct SessionStageOptions {
   std::filesystem::path case_dir;
-  std::optional<PlanId> plan_id;  ///< else the newest plan of the case's patient
+  /// Else the case's patient's one approved plan with a room map (any plan
+  /// with a room map for `unapproved` or a research run); several refused
+  /// (room_map/plan_stage.h ChoosePlanForSession).
+  std::optional<PlanId> plan_id;
+  /// Run on a plan that is not approved (tests, research); recorded in the
+  /// session and its audit entry. A research run (no role) always may.
+  bool unapproved = false;
+  /// Who runs the session (a therapist, or a research run; store/roles.h).
+  Operator op;
   /// Manual alignment: a 4x4 row-major room_from_model (= reconstruction_from_model)
   /// file; without it the alignment is automatic.
   std::optional<std::filesystem::path> initial_alignment;
@@ -78,7 +87,6 @@ struct SessionStageOptions {
   int min_stickers = 3;
   int poisson_depth = 8;
   int threads = 2;
-  std::string actor = "arpos session";
 
   std::string Check() const;  ///< empty if valid
 };
@@ -104,6 +112,8 @@ struct ScanCameraPose {
 
 struct SessionStageResult {
   PlanId plan_id;
+  std::string plan_choice;  ///< which plan and why (ChoosePlanForSession)
+  bool on_unapproved_plan = false;
   SessionId session_id;
   RecordingId recording_id;
   BodyMarkerMapId body_marker_map_id;
@@ -152,7 +162,8 @@ struct SessionStageResult {
 /// the reference model (model frame) and on the reconstruction (room frame
 /// at scan time), a rigid fit (Kabsch), refined by point-to-plane ICP of the
 /// reconstruction onto the model surface; both stored (method manual, then
-/// ICP as its child) with an audit entry. Throws InputError for fewer than
+/// ICP as its child) with an audit entry. Needs a role that runs sessions
+/// and an open session. Throws InputError for fewer than
 /// three pairs, pairs in a line, a reconstruction or plan that does not
 /// exist, or picks that disagree by more than `max_pick_rmse_m` after the
 /// fit (a pair picked on different anatomy).
@@ -165,7 +176,7 @@ struct ManualAlignmentResult {
 ManualAlignmentResult AlignStoredReconstruction(Database* database, ReconstructionId reconstruction,
                                                 const std::vector<Eigen::Vector3d>& model_points,
                                                 const std::vector<Eigen::Vector3d>& reconstruction_points,
-                                                const std::string& actor, double max_pick_rmse_m = 0.03,
+                                                const Operator& op, double max_pick_rmse_m = 0.03,
                                                 int threads = 2);
 
 struct ReconstructionFrameReport;

@@ -81,4 +81,41 @@ std::optional<int> UsageExit(const Args& args, const char* usage, size_t positio
   return std::nullopt;
 }
 
+namespace {
+OperatorFlags& MutableOperatorFlags() {
+  static OperatorFlags flags;
+  return flags;
+}
+}  // namespace
+
+void TakeOperatorFlags(std::vector<std::string>* argv) {
+  std::vector<std::string> rest;
+  for (size_t i = 0; i < argv->size(); ++i) {
+    const std::string& a = (*argv)[i];
+    std::string* target = nullptr;
+    std::string name;
+    for (const char* option : {"--user", "--role"}) {
+      const std::string o(option);
+      if (a == o || a.rfind(o + "=", 0) == 0) {
+        target = o == "--user" ? &MutableOperatorFlags().user : &MutableOperatorFlags().role;
+        name = o;
+      }
+    }
+    if (!target) {
+      rest.push_back(a);
+      continue;
+    }
+    if (a.size() > name.size()) {
+      *target = a.substr(name.size() + 1);
+    } else {
+      if (i + 1 >= argv->size()) ARPOS_INPUT_ERROR(name << " needs a value");
+      *target = (*argv)[++i];
+    }
+    if (target->empty()) ARPOS_INPUT_ERROR(name << " needs a non-empty value");
+  }
+  *argv = std::move(rest);
+}
+
+const OperatorFlags& GivenOperatorFlags() { return MutableOperatorFlags(); }
+
 }  // namespace arpos

@@ -37,4 +37,17 @@ class Args {
 /// to stderr and returns 2; otherwise nullopt (carry on).
 std::optional<int> UsageExit(const Args& args, const char* usage, size_t positionals);
 
+/// Who runs the command: `--user NAME` and `--role ROLE`, accepted anywhere
+/// on the command line; the executable removes them before the subcommand
+/// parses its own options (store/roles.h ResolveOperator reads them, then
+/// ARPOS_USER / ARPOS_ROLE). Empty when not given.
+struct OperatorFlags {
+  std::string user;
+  std::string role;
+};
+/// Removes --user/--role (`--user NAME` or `--user=NAME`) from `argv` and
+/// remembers them; throws InputError for a flag without a value.
+void TakeOperatorFlags(std::vector<std::string>* argv);
+const OperatorFlags& GivenOperatorFlags();
+
 }  // namespace arpos

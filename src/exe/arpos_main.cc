@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "exe/args.h"
 #include "exe/commands.h"
 #include "plugins/builtin_sources.h"
 #include "util/check.h"
@@ -82,6 +83,8 @@ void PrintHelp(std::ostream& out) {
         << c.summary << "\n";
   }
   out << "\nglobal options (before the command): --verbose, --quiet\n"
+      << "who: --user NAME --role technician|therapist|physicist|research (anywhere; else\n"
+      << "     $ARPOS_USER / $ARPOS_ROLE; no role: a research run, which may not approve plans)\n"
       << "The session store defaults to $ARPOS_STORE, else ./arpos_store.db; --store overrides it.\n";
 }
 
@@ -113,6 +116,12 @@ int main(int argc, char** argv) {
   arpos::RegisterBuiltinCameraSources();
   const std::string name = args.front();
   args.erase(args.begin());
+  try {
+    arpos::TakeOperatorFlags(&args);
+  } catch (const arpos::InputError& e) {
+    std::cerr << "arpos " << name << ": error: " << e.what() << std::endl;
+    return 2;
+  }
   for (const auto& command : Commands()) {
     if (name != command.name) continue;
     try {

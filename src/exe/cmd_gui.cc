@@ -15,10 +15,11 @@ namespace arpos {
 
 int RunGuiCommand(const std::vector<std::string>& argv) {
   const char* usage =
-      "usage: arpos gui [--store DB] [--case DIR] [--page N --screenshot FILE.png]\n"
+      "usage: arpos gui [--store DB] [--case DIR] [--user NAME --role ROLE] [--page N --screenshot FILE.png]\n"
       "Opens the wizard: case and store, planning, session, tracking, audit.\n"
       "  --store DB          session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
       "  --case DIR          preselect a case folder\n"
+      "  --user, --role      who (else $ARPOS_USER / $ARPOS_ROLE; changeable on the first page)\n"
       "  --page N            open page N (0 case, 1 planning, 2 session, 3 tracking, 4 audit)\n"
       "  --screenshot FILE   save a PNG of the window once it has drawn, then quit\n";
   const Args args(argv, {"store", "case", "page", "screenshot"}, {"help"});
@@ -38,6 +39,11 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
   ui::WizardSettings options;
   options.store_path = args.GetOr("store", DefaultStorePath());
   options.case_dir = args.GetOr("case", "");
+  options.user = GivenOperatorFlags().user;
+  options.role = GivenOperatorFlags().role;
+  if (!options.role.empty() && !ParseRole(options.role)) {
+    ARPOS_INPUT_ERROR("--role '" << options.role << "': not a role; the roles are " << RoleNames());
+  }
   ui::ArposWizard wizard(options);
   wizard.show();
   for (long long i = 0; i < page; ++i) wizard.next();

@@ -6,6 +6,7 @@
 #include "room_map/plan_stage.h"
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
+#include "store/lifecycle.h"
 #include "store/sqlite_database.h"
 #include "store/store_path.h"
 #include "util/check.h"
@@ -13,17 +14,70 @@
 
 namespace arpos {
 
-int RunPlanCommand(const std::vector<std::string>& argv) {
+namespace {
+
+int RunPlanApprove(const std::vector<std::string>& argv) {
   const char* usage =
-      "usage: arpos plan CASE_DIR [--store DB] [--plan ID] [options]\n"
+      "usage: arpos plan approve PLAN_ID [--note TEXT] [--store DB] --role physicist --user NAME\n"
+      "A physicist approves a plan: its reference model, target pose and room map. From then\n"
+      "on the plan cannot be changed, and therapists run sessions on it.\n";
+  const Args args(argv, {"store", "note"}, {"help"});
+  if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
+  const Operator op = ResolveOperator(GivenOperatorFlags().user, GivenOperatorFlags().role);
+  long long id = 0;
+  if (!ParseInt(args.positional()[0], &id) || id <= 0) {
+    ARPOS_INPUT_ERROR("plan approve: '" << args.positional()[0] << "' is not a plan id");
+  }
+  const std::string store_path = args.GetOr("store", DefaultStorePath());
+  auto database = SqliteDatabase::Open(store_path);
+  RecoverInterruptedSessions(database.get());
+  const PlanRecord plan = ApprovePlan(database.get(), op, PlanId(id), args.GetOr("note", ""));
+  std::cout << "plan " << plan.id.value() << " \"" << plan.name << "\" " << DescribeApproval(plan) << "\n";
+  return 0;
+}
+
+int RunPlanList(const std::vector<std::string>& argv) {
+  const char* usage =
+      "usage: arpos plan list [--patient ID] [--store DB]\n"
+      "Lists the plans (newest first) with their room maps, sessions and approval.\n";
+  const Args args(argv, {"store", "patient"}, {"help"});
+  if (const auto exit_status = UsageExit(args, usage, 0)) return *exit_status;
+  auto database = SqliteDatabase::Open(args.GetOr("store", DefaultStorePath()));
+  std::optional<PatientId> patient;
+  if (args.Has("patient")) {
+    const auto p = database->FindPatient(args.Require("patient"));
+    if (!p) ARPOS_INPUT_ERROR("--patient " << args.Require("patient") << ": no such patient in the store");
+    patient = p->id;
+  }
+  for (const PlanSummary& p : database->ListPlans(patient)) {
+    std::cout << StringPrintf("plan %lld  patient %s  \"%s\"  %lld room map(s), %lld session(s), %s\n",
+                              static_cast<long long>(p.id.value()), p.patient_external_id.c_str(), p.name.c_str(),
+                              static_cast<long long>(p.num_room_maps), static_cast<long long>(p.num_sessions),
+                              DescribeApproval(p).c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int RunPlanCommand(const std::vector<std::string>& argv) {
+  if (!argv.empty() && argv.front() == "approve") return RunPlanApprove({argv.begin() + 1, argv.end()});
+  if (!argv.empty() && argv.front() == "list") return RunPlanList({argv.begin() + 1, argv.end()});
+  const char* usage =
+      "usage: arpos plan CASE_DIR [--store DB] [--plan ID | --new-plan] [options]\n"
+      "       arpos plan approve PLAN_ID [--note TEXT]    (a physicist)\n"
+      "       arpos plan list [--patient ID]\n"
       "Builds the room map from CASE_DIR/room/ (DATASET.md): room markers (edge-fit\n"
       "corners, IPPE + depth, pose graph, bundle adjustment with the origin marker\n"
       "fixing the room frame) and keypoint landmarks with depth, adjusted jointly;\n"
-      "stores it as the room map of a plan. Without --plan, the newest plan of the\n"
-      "case's patient (the case folder name) is used, and a patient and plan are\n"
-      "created from the case if the store has none.\n"
+      "stores it as the room map of a plan. Without --plan, the case's patient's (the\n"
+      "case folder name) one plan that is not yet approved is used; a patient and plan\n"
+      "are created from the case if it has none; several are refused (choose one).\n"
+      "An approved plan is never changed. Planning is for a technician (--role technician)\n"
+      "or a research run (no role).\n"
       "  --store DB          session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
-      "  --plan ID           store the map under this plan\n"
+      "  --plan ID           store the map under this plan (not approved)\n"
+      "  --new-plan          a new plan for the patient, from the case's model and target pose\n"
       "  --patient ID        patient external id (default: the case folder name)\n"
       "  --frame-step N      use every N-th room frame (default 1)\n"
       "  --max-frames N      use at most N frames (default all)\n"
@@ -34,7 +88,7 @@ int RunPlanCommand(const std::vector<std::string>& argv) {
       "                      out: the couch moves during positioning)\n"
       "  --poses FILE        also write the room frames' camera poses (TUM)\n";
   const Args args(argv, {"store", "plan", "patient", "frame-step", "max-frames", "threads", "max-landmarks", "poses"},
-                  {"no-keypoints", "keep-couch", "help"});
+                  {"no-keypoints", "keep-couch", "new-plan", "help"});
   if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   PlanRoomMapOptions options;
   options.case_dir = args.positional()[0];
@@ -44,6 +98,8 @@ int RunPlanCommand(const std::vector<std::string>& argv) {
     options.plan_id = PlanId(id);
   }
   options.patient_external_id = args.GetOr("patient", "");
+  options.new_plan = args.Has("new-plan");
+  options.op = ResolveOperator(GivenOperatorFlags().user, GivenOperatorFlags().role);
   options.stage.frame_step = static_cast<int>(args.GetInt("frame-step", 1));
   options.stage.max_frames = static_cast<int>(args.GetInt("max-frames", 0));
   options.stage.threads = static_cast<int>(args.GetInt("threads", 2));
@@ -57,6 +113,7 @@ int RunPlanCommand(const std::vector<std::string>& argv) {
 
   const std::string store_path = args.GetOr("store", DefaultStorePath());
   auto database = SqliteDatabase::Open(store_path);
+  RecoverInterruptedSessions(database.get());
   int last_percent = -1;
   const PlanRoomMapResult result = RunPlanRoomMap(
       options, database.get(),

@@ -4,6 +4,7 @@
 #include "exe/args.h"
 #include "exe/cli_progress.h"
 #include "exe/commands.h"
+#include "store/lifecycle.h"
 #include "store/sqlite_database.h"
 #include "store/store_path.h"
 
@@ -17,7 +18,9 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
       "into a plan with the room map (planning), opens a session (body marker map,\n"
       "reconstruction, alignment), then tracks every tracking/<name> sequence (camera,\n"
       "patient and couch correction per frame). A stage that cannot be done is\n"
-      "reported (exit status 1); what earlier stages stored stays.\n"
+      "reported (exit status 1); what earlier stages stored stays. A research run (no\n"
+      "--role, or --role research): the plan it makes is not approved and its session\n"
+      "is recorded so; the session is completed at the end (aborted if tracking failed).\n"
       "  --store DB          session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
       "  --out DIR           write the session outputs (model_pose.txt, camera_pose.txt,\n"
       "                      reconstruction_mesh.ply) and, per tracking sequence,\n"
@@ -27,9 +30,10 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
       "  --tolerance-mm MM   tracking: translation tolerance (default 2)\n"
       "  --tolerance-deg DEG tracking: rotation tolerance (default 1)\n"
       "  --patient ID        patient id to file the plan under (default: the case folder name)\n"
-      "  --quick             check a sample of the images instead of all\n";
+      "  --quick             check a sample of the images instead of all\n"
+      "  --keep-open         leave the session open (to track more, e.g. in arpos gui)\n";
   const Args args(argv, {"store", "patient", "out", "tolerance-mm", "tolerance-deg"},
-                  {"quick", "no-overlay", "help"});
+                  {"quick", "no-overlay", "keep-open", "help"});
   if (const auto exit_status = UsageExit(args, usage, 1)) return *exit_status;
   RunCaseOptions options;
   options.case_dir = args.positional()[0];
@@ -39,8 +43,12 @@ int RunRunCaseCommand(const std::vector<std::string>& argv) {
   options.overlay = !args.Has("no-overlay");
   options.tolerances.translation_mm = args.GetDouble("tolerance-mm", 2.0);
   options.tolerances.rotation_deg = args.GetDouble("tolerance-deg", 1.0);
+  options.keep_session_open = args.Has("keep-open");
+  options.op = ResolveOperator(GivenOperatorFlags().user, GivenOperatorFlags().role);
+  RequirePermission(options.op, Action::kRunCase);
   const std::string store_path = args.GetOr("store", DefaultStorePath());
   auto database = SqliteDatabase::Open(store_path);
+  RecoverInterruptedSessions(database.get());
   RunCaseController controller(options, database.get(),
                                CliProgress());
   controller.Run();

@@ -6,6 +6,7 @@
 #include "room_map/plan_stage.h"
 #include "sensor/case_check.h"
 #include "sensor/case_config.h"
+#include "store/lifecycle.h"
 #include "store/sqlite_database.h"
 #include "store/store_path.h"
 #include "tracking/tracking_stage.h"
@@ -23,8 +24,9 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
       "planned pose, in IEC 61217 couch axes (README: \"Reading the correction\").\n"
       "Writes DIR/poses.txt, camera_poses.txt, corrections.csv, timing.csv (and\n"
       "overlay/<timestamp>.png with --overlay) and stores the run with every frame.\n"
-      "Without --session, the newest session of the case's patient is used (the case\n"
-      "folder above SEQ_DIR), else the newest in the store.\n"
+      "Without --session, the one open session of the case's patient is used (the case\n"
+      "folder above SEQ_DIR; several open sessions are refused). Tracking is for a\n"
+      "therapist (--role therapist) or a research run (no role), on an open session.\n"
       "  --store DB          session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
       "  --session ID        track against this session's stickers and alignment\n"
       "  --case DIR          case folder for case.yaml (default: the nearest folder above\n"
@@ -87,7 +89,11 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
   SqliteOpenOptions open_options;
   open_options.create_if_missing = false;
   auto database = SqliteDatabase::Open(store_path, open_options);
+  RecoverInterruptedSessions(database.get());
+  options.op = ResolveOperator(GivenOperatorFlags().user, GivenOperatorFlags().role);
+  RequirePermission(options.op, Action::kTrack);
   const TrackingInputs inputs = LoadTrackingInputs(database.get(), session, CasePatientId(*case_root));
+  std::cerr << "session: " << inputs.session_choice << "\n";
   std::cerr << StringPrintf("tracking against session %lld (plan %lld, room map %lld, %zu stickers)\n",
                             static_cast<long long>(inputs.session_id.value()),
                             static_cast<long long>(inputs.plan_id.value()),

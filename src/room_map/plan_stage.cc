@@ -6,6 +6,7 @@
 #include "geometry/mesh_io.h"
 #include "sensor/case_check.h"
 #include "sensor/sequence.h"
+#include "store/lifecycle.h"
 #include "store/record_conversions.h"
 #include "util/check.h"
 #include "util/logging.h"
@@ -18,13 +19,13 @@ std::string RoomMapStageOptions::Check() const {
   if (max_frames < 0) return "max frames must not be negative";
   if (threads < 1) return "threads must be at least 1";
   if (max_landmarks < 0) return "max landmarks must not be negative";
-  if (actor.empty()) return "actor must not be empty";
   return "";
 }
 
 std::string PlanRoomMapOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
   if (plan_id && !plan_id->valid()) return "plan id must be positive";
+  if (plan_id && new_plan) return "give either a plan or a new plan, not both";
   return stage.Check();
 }
 
@@ -158,6 +159,7 @@ std::string PlanRoomMapResult::Summary() const {
   out << "room map " << room_map_id.value() << " stored for plan " << plan_id.value()
       << (created_plan ? " (created)" : "") << ", patient " << patient_id.value() << ", recording "
       << recording_id.value() << "\n";
+  if (!plan_choice.empty()) out << "plan: " << plan_choice << "; not approved until a physicist approves it\n";
   out << "markers: " << build.map.markers.size() << " (origin " << build.map.origin_marker_id
       << "), residual mean " << StringPrintf("%.3f", build.map.mean_residual_px) << " px, max "
       << StringPrintf("%.3f", build.map.max_residual_px) << " px\n";
@@ -185,9 +187,56 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
   const CaseFolder folder = LoadCaseFolder(options.case_dir);
   const std::string patient_name =
       options.patient_external_id.empty() ? CasePatientId(folder.root) : options.patient_external_id;
-  // Fail before the long build on what the store can already tell.
-  if (options.plan_id && !database->GetPlan(*options.plan_id)) {
-    ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
+  RequirePermission(options.op, Action::kPlan);
+  const std::string actor = options.op.Actor("arpos plan");
+  // Which plan the map goes to; asked again inside the transaction below.
+  // An approved plan is never changed; without --plan the patient's one
+  // unapproved plan is used, a new plan made if it has none, and a choice
+  // between several refused.
+  auto choose_plan = [&](PlanRoomMapResult* result) {
+    if (options.plan_id) {
+      const std::optional<PlanRecord> plan = database->GetPlan(*options.plan_id);
+      if (!plan) ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
+      if (plan->approved()) {
+        ARPOS_INPUT_ERROR("plan " << plan->id.value() << " is " << DescribeApproval(*plan)
+                                  << ": an approved plan cannot be changed; make a new plan with --new-plan");
+      }
+      result->plan_id = plan->id;
+      result->patient_id = plan->patient_id;
+      result->plan_choice = "plan " + std::to_string(plan->id.value()) + " (given)";
+      return;
+    }
+    const std::optional<PatientRecord> patient = database->FindPatient(patient_name);
+    if (!patient) return;
+    result->patient_id = patient->id;
+    if (options.new_plan) return;
+    std::vector<PlanSummary> open_plans;
+    int approved = 0;
+    for (const PlanSummary& p : database->ListPlans(patient->id)) {
+      if (p.approved()) {
+        ++approved;
+      } else {
+        open_plans.push_back(p);
+      }
+    }
+    if (open_plans.size() > 1) {
+      std::string ids;
+      for (const PlanSummary& p : open_plans) ids += (ids.empty() ? "" : ", ") + std::to_string(p.id.value());
+      ARPOS_INPUT_ERROR("patient " << patient_name << " has " << open_plans.size()
+                                   << " plans that are not approved (" << ids
+                                   << "): choose one with --plan ID, or make a new one with --new-plan");
+    }
+    if (open_plans.size() == 1) {
+      result->plan_id = open_plans.front().id;
+      result->plan_choice = "plan " + std::to_string(result->plan_id.value()) + " (the patient's plan not yet approved)";
+    } else if (approved > 0) {
+      result->plan_choice = "a new plan (the patient's " + std::to_string(approved) +
+                            " approved plan(s) cannot be changed)";
+    }
+  };
+  {
+    PlanRoomMapResult probe;  // fail before the long build on what the store can already tell
+    choose_plan(&probe);
   }
 
   PlanRoomMapResult result;
@@ -197,28 +246,81 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
   // room that cannot be mapped leaves no patient, plan or recording behind.
   // The lookups run inside the transaction (which holds the write lock), so
   // another program planning the same case meanwhile is seen.
-  const std::string& actor = options.stage.actor;
   database->WithTransaction([&] {
-    if (options.plan_id) {
-      const std::optional<PlanRecord> plan = database->GetPlan(*options.plan_id);
-      if (!plan) ARPOS_INPUT_ERROR("the store has no plan " << options.plan_id->value());
-      result.plan_id = plan->id;
-      result.patient_id = plan->patient_id;
-    } else if (const std::optional<PatientRecord> patient = database->FindPatient(patient_name)) {
-      result.patient_id = patient->id;
-      const std::vector<PlanSummary> plans = database->ListPlans(patient->id, 1);
-      if (!plans.empty()) result.plan_id = plans.front().id;
-    }
+    choose_plan(&result);
     if (!result.patient_id.valid()) result.patient_id = AddCasePatient(database, folder, patient_name, actor);
     if (!result.plan_id.valid()) {
       result.plan_id = AddCasePlan(database, result.patient_id, folder, LoadTriangleMesh(folder.reference_model),
                                    patient_name, actor);
       result.created_plan = true;
+      if (result.plan_choice.empty()) result.plan_choice = "a new plan";
+      result.plan_choice += ": plan " + std::to_string(result.plan_id.value()) + " created";
     }
     result.recording_id = AddRoomRecording(database, result.plan_id, folder);
     result.room_map_id = StoreRoomMap(database, result.plan_id, result.recording_id, folder, result.build, actor);
   });
   return result;
+}
+
+PlanId ChoosePlanForSession(Database* database, std::optional<PlanId> given, const std::string& patient_external_id,
+                            bool need_approved, std::string* said) {
+  auto describe = [&](PlanId id, const std::string& name, const std::string& approval) {
+    return "plan " + std::to_string(id.value()) + " \"" + name + "\" (" + approval + ")";
+  };
+  const std::string approve_hint = " (a physicist approves a plan: arpos plan approve ID --role physicist; "
+                                   "a session on a plan not approved needs --unapproved, and is recorded so)";
+  if (given) {
+    const std::optional<PlanRecord> plan = database->GetPlan(*given);
+    if (!plan) ARPOS_INPUT_ERROR("the store has no plan " << given->value());
+    if (!database->LatestRoomMap(*given)) {
+      ARPOS_INPUT_ERROR("plan " << given->value() << " has no room map: run `arpos plan CASE --plan "
+                                << given->value() << "` first");
+    }
+    if (need_approved && !plan->approved()) {
+      ARPOS_INPUT_ERROR("plan " << given->value() << " is not approved" << approve_hint);
+    }
+    if (said) *said = "using " + describe(plan->id, plan->name, DescribeApproval(*plan)) + ", as given";
+    return plan->id;
+  }
+  const std::optional<PatientRecord> patient = database->FindPatient(patient_external_id);
+  if (!patient) {
+    ARPOS_INPUT_ERROR("the store has no patient '" << patient_external_id
+                                                   << "' (the case folder's name): plan the case first (arpos plan "
+                                                      "CASE), or give --plan ID");
+  }
+  std::vector<PlanSummary> with_map, approved;
+  std::vector<PlanSummary> all = database->ListPlans(patient->id);
+  for (const PlanSummary& p : all) {
+    if (p.num_room_maps == 0) continue;
+    with_map.push_back(p);
+    if (p.approved()) approved.push_back(p);
+  }
+  const std::vector<PlanSummary>& candidates = (need_approved || !approved.empty()) ? approved : with_map;
+  if (candidates.size() == 1) {
+    const PlanSummary& p = candidates.front();
+    if (said) {
+      *said = "using " + describe(p.id, p.name, DescribeApproval(p)) + ", the patient's only " +
+              (p.approved() ? "approved plan" : "plan with a room map");
+    }
+    return p.id;
+  }
+  if (candidates.size() > 1) {
+    std::string list;
+    for (const PlanSummary& p : candidates) {
+      list += (list.empty() ? "" : "; ") + describe(p.id, p.name, DescribeApproval(p));
+    }
+    ARPOS_INPUT_ERROR("patient " << patient_external_id << " has " << candidates.size() << " "
+                                 << (candidates.front().approved() ? "approved plans" : "plans with a room map")
+                                 << ": " << list << "; choose one with --plan ID");
+  }
+  if (all.empty()) ARPOS_INPUT_ERROR("patient " << patient_external_id << " has no plan: run `arpos plan CASE` first");
+  if (with_map.empty()) {
+    ARPOS_INPUT_ERROR("no plan of patient " << patient_external_id << " has a room map: run `arpos plan CASE` first");
+  }
+  std::string list;
+  for (const PlanSummary& p : with_map) list += (list.empty() ? "" : ", ") + std::to_string(p.id.value());
+  ARPOS_INPUT_ERROR("no plan of patient " << patient_external_id << " is approved (plans with a room map: " << list
+                                          << ")" << approve_hint);
 }
 
 RoomMap LoadRoomMapForLocalization(Database* database, std::optional<PlanId> plan,

@@ -23,6 +23,7 @@
 #include "room_map/room_map_builder.h"
 #include "sensor/case_folder.h"
 #include "store/database.h"
+#include "store/roles.h"
 
 namespace arpos {
 
@@ -36,7 +37,6 @@ struct RoomMapStageOptions {
   /// Leave out landmarks around the isocentre at the target pose (couch top
   /// and patient move during positioning; see CouchExclusionBox).
   bool exclude_couch = true;
-  std::string actor = "arpos plan";  ///< for the audit log
 
   std::string Check() const;  ///< empty if valid
 };
@@ -78,7 +78,11 @@ struct PlanRoomMapOptions {
   std::filesystem::path case_dir;
   std::optional<PlanId> plan_id;    ///< else the newest plan of the case's patient, created if none
   std::string patient_external_id;  ///< empty: the case folder's name
+  /// A new plan for the patient even if it has an unapproved one.
+  bool new_plan = false;
   RoomMapStageOptions stage;
+  /// Who plans (a technician, or a research run; store/roles.h).
+  Operator op;
 
   std::string Check() const;
 };
@@ -87,6 +91,7 @@ struct PlanRoomMapResult {
   PatientId patient_id;
   PlanId plan_id;
   bool created_plan = false;
+  std::string plan_choice;  ///< which plan and why, for the user
   RecordingId recording_id;
   RoomMapId room_map_id;
   RoomMapBuildResult build;
@@ -95,6 +100,16 @@ struct PlanRoomMapResult {
 
 PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* database,
                                  const ControllerCallbacks& callbacks = {});
+
+/// The plan a session uses: `given` if set, else the one plan of the
+/// patient `patient_external_id` that has a room map and, if
+/// `need_approved`, is approved (with !need_approved, approved plans are
+/// preferred when there are any). Never a guess: more than one candidate is
+/// refused with their ids ("choose one with --plan ID"); none is refused
+/// with what is missing (no plan, no room map, not approved and who
+/// approves). `said` receives a line for the user: which plan and why.
+PlanId ChoosePlanForSession(Database* database, std::optional<PlanId> given, const std::string& patient_external_id,
+                            bool need_approved, std::string* said = nullptr);
 
 /// The room map to localise against: the newest map of `plan` if given, else
 /// of the newest plan (with a map) of the patient `patient_external_id`, else

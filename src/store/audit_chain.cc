@@ -122,6 +122,8 @@ std::string AuditVerification::ToText() const {
 AuditVerification VerifyAuditLog(sqlite3* db) {
   AuditVerification v;
   std::set<std::string> entities;
+  std::set<std::string> entity_actions;  // "action entity"
+
   // The chain, in id order.
   {
     SqliteStatement s(db,
@@ -140,6 +142,7 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
       const std::string prev_hash = s.ColumnText(6), entry_hash = s.ColumnText(7);
       ++v.entries;
       entities.insert(e.entity);
+      entity_actions.insert(e.action + " " + e.entity);
       const std::string where = StringPrintf("audit entry %lld (%s %s by %s)", static_cast<long long>(e.id.value()),
                                              e.action.c_str(), e.entity.c_str(), e.actor.c_str());
       if (entry_hash.empty() && prev_hash.empty() && !chain_started) {
@@ -184,6 +187,37 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
         v.problems.push_back("trigger " + name + " is missing: the audit log is no longer append-only");
       } else if (it->second != sql) {
         v.problems.push_back("trigger " + name + " differs from the schema's: " + it->second);
+      }
+    }
+  }
+  // The triggers that keep an approved plan as it was approved (schema 7).
+  if (QueryInt64(db, "SELECT COUNT(*) FROM pragma_table_info('plans') WHERE name = 'approved_unix_ms'") > 0) {
+    for (const char* name : {"plans_approved_are_locked", "plans_approval_only", "plans_approved_are_kept",
+                             "room_maps_not_for_approved_plans"}) {
+      if (QueryInt64(db, StringPrintf("SELECT COUNT(*) FROM sqlite_master WHERE type = 'trigger' AND name = '%s'",
+                                      name)) == 0) {
+        v.problems.push_back(std::string("trigger ") + name + " is missing: approved plans can be changed");
+      }
+    }
+    // Approvals and session ends are made by audited controllers only.
+    SqliteStatement approved(db, "SELECT plan_id FROM plans WHERE approved_unix_ms IS NOT NULL ORDER BY plan_id");
+    while (approved.Step()) {
+      const long long id = approved.ColumnInt64(0);
+      if (!entity_actions.count(StringPrintf("approve_plan plan:%lld", id))) {
+        v.problems.push_back(StringPrintf("plan %lld is marked approved but no approve_plan entry records it: "
+                                          "approved outside the program",
+                                          id));
+      }
+    }
+    SqliteStatement ended(db, "SELECT session_id, status FROM sessions WHERE status <> 'open' ORDER BY session_id");
+    while (ended.Step()) {
+      const long long id = ended.ColumnInt64(0);
+      const std::string status = ended.ColumnText(1);
+      const std::string action = status == "completed" ? "complete_session" : "abort_session";
+      if (!entity_actions.count(StringPrintf("%s session:%lld", action.c_str(), id))) {
+        v.problems.push_back(StringPrintf("session %lld is marked %s but no %s entry records it: changed outside "
+                                          "the program",
+                                          id, status.c_str(), action.c_str()));
       }
     }
   }

@@ -97,6 +97,12 @@ class Database {
   virtual std::vector<PlanSummary> ListPlans(std::optional<PatientId> patient = std::nullopt,
                                              std::size_t limit = 0) = 0;
 
+  /// Approves an unapproved plan: `by` ("name (role)"), `note`, at
+  /// `approved_unix_ms` (0: now). Throws if the plan does not exist or is
+  /// already approved. Role checks are the caller's (store/roles.h).
+  virtual void ApprovePlan(PlanId id, const std::string& by, const std::string& note,
+                           std::int64_t approved_unix_ms = 0) = 0;
+
   virtual RoomMapId AddRoomMap(const RoomMapRecord& room_map) = 0;
   virtual std::optional<RoomMapRecord> GetRoomMap(RoomMapId id) = 0;
   /// The most recently created room map of a plan.
@@ -109,9 +115,15 @@ class Database {
   virtual std::vector<SessionRecord> ListSessions(std::optional<PlanId> plan = std::nullopt,
                                                   std::size_t limit = 0) = 0;
   /// Moves an open session to kCompleted or kAborted at `ended_unix_ms` (0:
-  /// now). Throws if the session does not exist or is no longer open.
-  virtual void FinishSession(SessionId id, SessionStatus status,
-                             std::int64_t ended_unix_ms = 0) = 0;
+  /// now), by `ended_by` for `reason`. Throws if the session does not exist
+  /// or is no longer open.
+  virtual void FinishSession(SessionId id, SessionStatus status, std::int64_t ended_unix_ms = 0,
+                             const std::string& ended_by = "", const std::string& reason = "") = 0;
+  /// Commands at work on sessions (SessionActivity): Begin returns the row's
+  /// id, End removes it (no error if it is gone), List gives all, oldest first.
+  virtual std::int64_t BeginSessionActivity(const SessionActivity& activity) = 0;
+  virtual void EndSessionActivity(std::int64_t activity_id) = 0;
+  virtual std::vector<SessionActivity> ListSessionActivities() = 0;
 
   virtual RecordingId AddRecording(const RecordingRecord& recording) = 0;
   virtual std::optional<RecordingRecord> GetRecording(RecordingId id) = 0;

@@ -45,7 +45,10 @@ std::string DescribeStore(Database& database, std::size_t max_listed) {
   for (const PlanSummary& plan : plans) {
     out << "  plan " << plan.id.value() << "  '" << plan.name << "'  patient "
         << plan.patient_external_id << "  created " << FormatUtcTime(plan.created_unix_ms)
-        << "  sessions " << plan.num_sessions << "\n";
+        << "  sessions " << plan.num_sessions << "  room maps " << plan.num_room_maps << "  "
+        << (plan.approved() ? "approved by " + plan.approved_by + " " + FormatUtcTime(*plan.approved_unix_ms)
+                            : std::string("not approved"))
+        << "\n";
   }
   const std::vector<SessionRecord> sessions = database.ListSessions(std::nullopt, max_listed);
   out << "Latest sessions:" << (sessions.empty() ? " none" : "") << "\n";
@@ -55,6 +58,9 @@ std::string DescribeStore(Database& database, std::size_t max_listed) {
         << FormatUtcTime(session.started_unix_ms);
     if (session.ended_unix_ms) out << "  ended " << FormatUtcTime(*session.ended_unix_ms);
     if (!session.operator_name.empty()) out << "  operator " << session.operator_name;
+    if (!session.ended_by.empty()) out << "  ended by " << session.ended_by;
+    if (!session.end_reason.empty()) out << " (" << session.end_reason << ")";
+    if (session.on_unapproved_plan) out << "  on a plan not approved";
     out << "\n";
   }
   return out.str();

@@ -91,6 +91,13 @@ struct PlanRecord {
   StoredTriangleMesh reference_model;  ///< model frame, metres
   Rigid3d room_from_model_target;      ///< desired pose of the model in the room
   std::int64_t created_unix_ms = 0;
+  /// Approval (Database::ApprovePlan; only a physicist approves, store/roles.h).
+  /// Empty / nullopt while the plan is not approved; AddPlan ignores them.
+  /// An approved plan cannot be changed, deleted, or given another room map.
+  std::string approved_by;  ///< "name (role)"
+  std::optional<std::int64_t> approved_unix_ms;
+  std::string approval_note;
+  bool approved() const { return approved_unix_ms.has_value(); }
 };
 
 /// One line of a plan listing (no blobs).
@@ -101,6 +108,10 @@ struct PlanSummary {
   std::string name;
   std::int64_t created_unix_ms = 0;
   std::int64_t num_sessions = 0;
+  std::int64_t num_room_maps = 0;
+  std::string approved_by;                       ///< empty while not approved
+  std::optional<std::int64_t> approved_unix_ms;  ///< nullopt while not approved
+  bool approved() const { return approved_unix_ms.has_value(); }
 };
 
 /// A room marker in the map: its 4 corners in the room frame (metres, OpenCV
@@ -158,6 +169,23 @@ struct SessionRecord {
   SessionStatus status = SessionStatus::kOpen;
   std::optional<std::int64_t> ended_unix_ms;  ///< set when no longer open
   std::string notes;
+  /// The session ran on a plan that was not approved (the --unapproved
+  /// escape, or a research run); recorded when it is opened.
+  bool on_unapproved_plan = false;
+  std::string ended_by;    ///< who completed or aborted it ("name (role)")
+  std::string end_reason;  ///< why, in words (aborted runs; may be empty)
+};
+
+/// A command at work on a session (a tracking run, the positioning screen):
+/// one row while it runs. A row left behind by a process that no longer
+/// exists is a run that died (controllers/session_lifecycle.h).
+struct SessionActivity {
+  std::int64_t id = 0;  ///< set by the store
+  SessionId session_id;
+  std::int64_t pid = 0;
+  std::string host;
+  std::string command;  ///< e.g. "arpos track seq_00"
+  std::int64_t started_unix_ms = 0;
 };
 
 enum class RecordingKind { kRoom, kBodyScan, kTracking };

@@ -119,7 +119,7 @@ constexpr const char* kPatientColumns =
     "SELECT patient_id, external_id, display_name, created_unix_ms FROM patients ";
 constexpr const char* kSessionColumns =
     "SELECT session_id, plan_id, fraction, operator_name, started_unix_ms, status, "
-    "ended_unix_ms, notes FROM sessions ";
+    "ended_unix_ms, notes, on_unapproved_plan, ended_by, end_reason FROM sessions ";
 constexpr const char* kAlignmentColumns =
     "SELECT alignment_id, reconstruction_id, parent_alignment_id, method, "
     "reconstruction_from_model, fitness, rmse_m, num_inliers, options, created_unix_ms "
@@ -144,6 +144,9 @@ SessionRecord ReadSession(const SqliteStatement& s) {
   session.status = ParseSessionStatus(s.ColumnText(5));
   if (!s.ColumnIsNull(6)) session.ended_unix_ms = s.ColumnInt64(6);
   session.notes = s.ColumnText(7);
+  session.on_unapproved_plan = s.ColumnInt64(8) != 0;
+  session.ended_by = s.ColumnText(9);
+  session.end_reason = s.ColumnText(10);
   return session;
 }
 
@@ -315,7 +318,8 @@ PlanId SqliteDatabase::AddPlan(const PlanRecord& plan) {
 std::optional<PlanRecord> SqliteDatabase::GetPlan(PlanId id) {
   SqliteStatementGuard s(
       Prepared("SELECT patient_id, name, reference_model_name, reference_model_mesh, "
-               "room_from_model_target, created_unix_ms FROM plans WHERE plan_id = ?1"));
+               "room_from_model_target, created_unix_ms, approved_by, approved_unix_ms, approval_note "
+               "FROM plans WHERE plan_id = ?1"));
   s->BindId(1, id);
   if (!s->Step()) return std::nullopt;
   PlanRecord plan;
@@ -328,14 +332,37 @@ std::optional<PlanRecord> SqliteDatabase::GetPlan(PlanId id) {
   plan.room_from_model_target =
       DecodePose(s->ColumnBlob(4), Context("plans.room_from_model_target", "plan", id.value()));
   plan.created_unix_ms = s->ColumnInt64(5);
+  if (!s->ColumnIsNull(7)) {
+    plan.approved_by = s->ColumnIsNull(6) ? "" : s->ColumnText(6);
+    plan.approved_unix_ms = s->ColumnInt64(7);
+  }
+  plan.approval_note = s->ColumnText(8);
   return plan;
+}
+
+void SqliteDatabase::ApprovePlan(PlanId id, const std::string& by, const std::string& note,
+                                 std::int64_t approved_unix_ms) {
+  ARPOS_CHECK(!by.empty(), "a plan's approval names who approved it");
+  SqliteStatementGuard s(
+      Prepared("UPDATE plans SET approved_by = ?1, approved_unix_ms = ?2, approval_note = ?3 "
+               "WHERE plan_id = ?4 AND approved_unix_ms IS NULL"));
+  s->BindText(1, by);
+  s->BindInt64(2, OrNow(approved_unix_ms));
+  s->BindText(3, note);
+  s->BindId(4, id);
+  s->Execute();
+  if (sqlite3_changes(db_) != 1) {
+    throw Error(path_ + ": plan " + std::to_string(id.value()) + " does not exist or is already approved");
+  }
 }
 
 std::vector<PlanSummary> SqliteDatabase::ListPlans(std::optional<PatientId> patient,
                                                    std::size_t limit) {
   SqliteStatementGuard s(
       Prepared("SELECT p.plan_id, p.patient_id, pt.external_id, p.name, p.created_unix_ms, "
-               "(SELECT COUNT(*) FROM sessions AS s WHERE s.plan_id = p.plan_id) "
+               "(SELECT COUNT(*) FROM sessions AS s WHERE s.plan_id = p.plan_id), "
+               "(SELECT COUNT(*) FROM room_maps AS m WHERE m.plan_id = p.plan_id), "
+               "p.approved_by, p.approved_unix_ms "
                "FROM plans AS p JOIN patients AS pt ON pt.patient_id = p.patient_id "
                "WHERE ?1 IS NULL OR p.patient_id = ?1 "
                "ORDER BY p.created_unix_ms DESC, p.plan_id DESC LIMIT ?2"));
@@ -350,6 +377,11 @@ std::vector<PlanSummary> SqliteDatabase::ListPlans(std::optional<PatientId> pati
     plan.name = s->ColumnText(3);
     plan.created_unix_ms = s->ColumnInt64(4);
     plan.num_sessions = s->ColumnInt64(5);
+    plan.num_room_maps = s->ColumnInt64(6);
+    if (!s->ColumnIsNull(8)) {
+      plan.approved_by = s->ColumnIsNull(7) ? "" : s->ColumnText(7);
+      plan.approved_unix_ms = s->ColumnInt64(8);
+    }
     plans.push_back(std::move(plan));
   }
   return plans;
@@ -479,7 +511,8 @@ SessionId SqliteDatabase::AddSession(const SessionRecord& session) {
                   << ToString(session.status) << ")");
   SqliteStatementGuard s(
       Prepared("INSERT INTO sessions (plan_id, fraction, operator_name, started_unix_ms, status, "
-               "ended_unix_ms, notes) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+               "ended_unix_ms, notes, on_unapproved_plan, ended_by, end_reason) "
+               "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)"));
   s->BindId(1, session.plan_id);
   s->BindInt64(2, session.fraction);
   s->BindText(3, session.operator_name);
@@ -491,6 +524,9 @@ SessionId SqliteDatabase::AddSession(const SessionRecord& session) {
     s->BindNull(6);
   }
   s->BindText(7, session.notes);
+  s->BindInt64(8, session.on_unapproved_plan ? 1 : 0);
+  s->BindText(9, session.ended_by);
+  s->BindText(10, session.end_reason);
   s->Execute();
   return SessionId(LastInsertRowId());
 }
@@ -516,20 +552,60 @@ std::vector<SessionRecord> SqliteDatabase::ListSessions(std::optional<PlanId> pl
   return sessions;
 }
 
-void SqliteDatabase::FinishSession(SessionId id, SessionStatus status, std::int64_t ended_unix_ms) {
+void SqliteDatabase::FinishSession(SessionId id, SessionStatus status, std::int64_t ended_unix_ms,
+                                   const std::string& ended_by, const std::string& reason) {
   ARPOS_CHECK(status != SessionStatus::kOpen,
               "FinishSession needs status completed or aborted, not open");
   SqliteStatementGuard s(
-      Prepared("UPDATE sessions SET status = ?1, ended_unix_ms = ?2 "
+      Prepared("UPDATE sessions SET status = ?1, ended_unix_ms = ?2, ended_by = ?4, end_reason = ?5 "
                "WHERE session_id = ?3 AND status = 'open'"));
   s->BindText(1, ToString(status));
   s->BindInt64(2, OrNow(ended_unix_ms));
   s->BindId(3, id);
+  s->BindText(4, ended_by);
+  s->BindText(5, reason);
   s->Execute();
   if (sqlite3_changes(db_) != 1) {
     throw Error(path_ + ": session " + std::to_string(id.value()) +
                 " does not exist or is no longer open");
   }
+}
+
+std::int64_t SqliteDatabase::BeginSessionActivity(const SessionActivity& activity) {
+  SqliteStatementGuard s(
+      Prepared("INSERT INTO session_activity (session_id, pid, host, command, started_unix_ms) "
+               "VALUES (?1, ?2, ?3, ?4, ?5)"));
+  s->BindId(1, activity.session_id);
+  s->BindInt64(2, activity.pid);
+  s->BindText(3, activity.host);
+  s->BindText(4, activity.command);
+  s->BindInt64(5, OrNow(activity.started_unix_ms));
+  s->Execute();
+  return LastInsertRowId();
+}
+
+void SqliteDatabase::EndSessionActivity(std::int64_t activity_id) {
+  SqliteStatementGuard s(Prepared("DELETE FROM session_activity WHERE activity_id = ?1"));
+  s->BindInt64(1, activity_id);
+  s->Execute();
+}
+
+std::vector<SessionActivity> SqliteDatabase::ListSessionActivities() {
+  SqliteStatementGuard s(
+      Prepared("SELECT activity_id, session_id, pid, host, command, started_unix_ms "
+               "FROM session_activity ORDER BY activity_id"));
+  std::vector<SessionActivity> out;
+  while (s->Step()) {
+    SessionActivity a;
+    a.id = s->ColumnInt64(0);
+    a.session_id = SessionId(s->ColumnInt64(1));
+    a.pid = s->ColumnInt64(2);
+    a.host = s->ColumnText(3);
+    a.command = s->ColumnText(4);
+    a.started_unix_ms = s->ColumnInt64(5);
+    out.push_back(std::move(a));
+  }
+  return out;
 }
 
 // ---------------------------------------------------------------- recordings

@@ -71,6 +71,8 @@ class SqliteDatabase final : public Database {
   std::vector<PlanSummary> ListPlans(std::optional<PatientId> patient = std::nullopt,
                                      std::size_t limit = 0) override;
 
+  void ApprovePlan(PlanId id, const std::string& by, const std::string& note,
+                   std::int64_t approved_unix_ms = 0) override;
   RoomMapId AddRoomMap(const RoomMapRecord& room_map) override;
   std::optional<RoomMapRecord> GetRoomMap(RoomMapId id) override;
   std::optional<RoomMapId> LatestRoomMap(PlanId plan) override;
@@ -79,7 +81,11 @@ class SqliteDatabase final : public Database {
   std::optional<SessionRecord> GetSession(SessionId id) override;
   std::vector<SessionRecord> ListSessions(std::optional<PlanId> plan = std::nullopt,
                                           std::size_t limit = 0) override;
-  void FinishSession(SessionId id, SessionStatus status, std::int64_t ended_unix_ms = 0) override;
+  void FinishSession(SessionId id, SessionStatus status, std::int64_t ended_unix_ms = 0,
+                     const std::string& ended_by = "", const std::string& reason = "") override;
+  std::int64_t BeginSessionActivity(const SessionActivity& activity) override;
+  void EndSessionActivity(std::int64_t activity_id) override;
+  std::vector<SessionActivity> ListSessionActivities() override;
 
   RecordingId AddRecording(const RecordingRecord& recording) override;
   std::optional<RecordingRecord> GetRecording(RecordingId id) override;

@@ -11,6 +11,7 @@
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
 #include "store/database.h"
+#include "store/lifecycle.h"
 #include "store/record_conversions.h"
 #include "tracking/overlay.h"
 #include "util/check.h"
@@ -48,42 +49,59 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   ARPOS_CHECK(database != nullptr, "tracking needs a session store");
   std::optional<SessionPieces> pieces;
   SessionId chosen;
+  std::string said;
   if (session) {
-    if (!database->GetSession(*session)) ARPOS_INPUT_ERROR("the store has no session " << session->value());
+    RequireOpenSession(database, *session, "tracking");
     pieces = PiecesOf(database, *session);
     if (!pieces) {
       ARPOS_INPUT_ERROR("session " << session->value()
                                    << " has no body marker map and aligned reconstruction: run `arpos session CASE` first");
     }
     chosen = *session;
+    said = "session " + std::to_string(chosen.value()) + ", as given";
   } else {
+    // The open sessions (with what tracking needs) of the case's patient, or
+    // of the whole store when the store does not know the patient. Never a
+    // guess: several are refused.
     std::vector<SessionRecord> sessions;
+    std::string whose = "the store";
     if (!patient_external_id.empty()) {
       if (const auto patient = database->FindPatient(patient_external_id)) {
+        whose = "patient " + patient_external_id;
         for (const auto& plan : database->ListPlans(patient->id)) {
           for (const auto& s : database->ListSessions(plan.id)) sessions.push_back(s);
         }
-        std::stable_sort(sessions.begin(), sessions.end(), [](const SessionRecord& a, const SessionRecord& b) {
-          return a.started_unix_ms != b.started_unix_ms ? a.started_unix_ms > b.started_unix_ms
-                                                        : a.id.value() > b.id.value();
-        });
       }
     }
-    if (sessions.empty()) sessions = database->ListSessions();
+    if (whose == "the store") sessions = database->ListSessions();
+    std::vector<SessionRecord> usable;
+    int closed = 0;
     for (const auto& s : sessions) {
-      pieces = PiecesOf(database, s.id);
-      if (pieces) {
-        chosen = s.id;
-        break;
+      if (s.status != SessionStatus::kOpen) {
+        ++closed;
+      } else if (PiecesOf(database, s.id)) {
+        usable.push_back(s);
       }
     }
-    if (!pieces) {
-      ARPOS_INPUT_ERROR("the store has no session with a body marker map and an alignment"
-                        << (sessions.empty() ? " (and no session)" : "") << ": run `arpos session CASE` first");
+    if (usable.size() > 1) {
+      std::string ids;
+      for (const auto& s : usable) ids += (ids.empty() ? "" : ", ") + std::to_string(s.id.value());
+      ARPOS_INPUT_ERROR(whose << " has " << usable.size() << " open sessions (" << ids
+                              << "): choose one with --session ID (and complete or abort the others: "
+                                 "arpos session complete|abort ID)");
     }
+    if (usable.empty()) {
+      ARPOS_INPUT_ERROR(whose << " has no open session with a body marker map and an alignment"
+                              << (closed > 0 ? " (" + std::to_string(closed) + " completed or aborted)" : "")
+                              << ": run `arpos session CASE` first");
+    }
+    chosen = usable.front().id;
+    pieces = PiecesOf(database, chosen);
+    said = "session " + std::to_string(chosen.value()) + ", the only open session of " + whose;
   }
   TrackingInputs in;
   in.session_id = chosen;
+  in.session_choice = said;
   const std::optional<SessionRecord> s = database->GetSession(chosen);
   ARPOS_CHECK(s.has_value(), "session " << chosen.value() << " vanished");
   in.plan_id = s->plan_id;
@@ -139,6 +157,8 @@ std::string TrackSequenceResult::Summary() const {
 
 TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,
                                   const TrackSequenceOptions& options) {
+  RequirePermission(options.op, Action::kTrack);
+  const std::string actor = options.op.Actor("arpos track");
   ARPOS_CHECK(database != nullptr, "tracking needs a session store");
   const std::string tol_problem = options.tolerances.Validate();
   if (!tol_problem.empty()) ARPOS_INPUT_ERROR("tolerances: " << tol_problem);
@@ -146,6 +166,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     ARPOS_INPUT_ERROR("room map " << inputs.room_map_id.value() << " was built with " << inputs.room_map.marker_size_m
                                   << " m markers but case.yaml says " << config.room_markers.size_m << " m");
   }
+  RequireOpenSession(database, inputs.session_id, "tracking");
   const Sequence sequence = Sequence::OpenEveryColourFrame(options.sequence_dir);
   TrackSequenceResult result;
   result.name = options.name.empty() ? std::filesystem::absolute(options.sequence_dir).lexically_normal().filename().string()
@@ -158,6 +179,9 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     if (ec) ARPOS_INPUT_ERROR(options.out_dir.string() << ": cannot create the output folder (" << ec.message() << ")");
   }
 
+  // At work on the session until the run is stored: a run that dies leaves
+  // the session to be marked aborted by the next command (store/lifecycle.h).
+  const SessionActivityGuard activity(database, inputs.session_id, "arpos track " + result.name);
   TrackerOptions tracker_options = MakeTrackerOptions(config, inputs);
   tracker_options.tolerances = options.tolerances;
   tracker_options.parallel = options.parallel;
@@ -338,7 +362,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     run.recording_id = result.recording_id;
     result.run_id = database->AddTrackingRun(run);
     database->AppendTrackingFrames(result.run_id, records);
-    database->AppendAudit({AuditId(), 0, options.actor, "track",
+    database->AppendAudit({AuditId(), 0, actor, "track",
                            "tracking_run:" + std::to_string(result.run_id.value()), result.Summary()});
   });
   return result;

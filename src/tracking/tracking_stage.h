@@ -25,6 +25,7 @@
 #include "sensor/case_config.h"
 #include "sensor/tum_io.h"
 #include "store/records.h"
+#include "store/roles.h"
 #include "tracking/tracker.h"
 
 namespace arpos {
@@ -48,12 +49,15 @@ struct TrackingInputs {
   /// The patient's pose at the session's body scan (the alignment): where
   /// tracking looks first.
   Rigid3d room_from_model_at_scan;
+  /// Which session and why, for the user.
+  std::string session_choice;
 };
 
-/// The inputs of `session` if given, else of the newest session (with a
-/// body marker map and an alignment) of the patient `patient_external_id`,
-/// else the newest such session in the store. Throws InputError saying what
-/// is missing and which command makes it.
+/// The inputs of `session` if given (it must be open), else of the one open
+/// session (with a body marker map and an alignment) of the patient
+/// `patient_external_id`, or of the store if it does not know the patient;
+/// several open sessions are refused ("choose one with --session ID").
+/// Throws InputError saying what is missing and which command makes it.
 TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
                                   const std::string& patient_external_id);
 
@@ -67,7 +71,8 @@ struct TrackSequenceOptions {
   std::filesystem::path out_dir;
   bool overlay = false;
   CouchTolerances tolerances;
-  std::string actor = "arpos track";
+  /// Who tracks (a therapist, or a research run; store/roles.h).
+  Operator op;
   /// The tracking recording already stored for this sequence (run-case
   /// registers them); otherwise one is added with the run.
   std::optional<RecordingId> recording_id;

@@ -20,6 +20,7 @@
 #include "simulation/simulation_truth.h"
 #include "simulation/simulator.h"
 #include "sensor/tum_io.h"
+#include "store/lifecycle.h"
 #include "store/sqlite_database.h"
 #include "util/check.h"
 #include "util/file.h"
@@ -139,6 +140,7 @@ RunCaseResult RunCase(const fs::path& case_dir, Database* db, std::optional<fs::
   RunCaseOptions options;
   options.case_dir = case_dir;
   options.out_dir = out_dir;
+  options.keep_session_open = true;  // the manual alignment below adds to it
   RunCaseController run(options, db);
   run.Run();
   return run.result();
@@ -321,7 +323,7 @@ TEST(SessionStage, ManualAlignmentFromPickedPairsIsRefinedAndStored) {
     on_reconstruction.push_back(truth * best + pick_error[k]);
   }
   const ManualAlignmentResult r =
-      AlignStoredReconstruction(db.get(), reconstructions[0], on_model, on_reconstruction, "test");
+      AlignStoredReconstruction(db.get(), reconstructions[0], on_model, on_reconstruction, Operator{"test", Role::kResearch, false});
   const PoseError e = ComputePoseError(truth, r.room_from_model);
   EXPECT_LT(e.translation_mm, 5.0);
   EXPECT_LT(e.rotation_deg, 0.5);
@@ -333,11 +335,20 @@ TEST(SessionStage, ManualAlignmentFromPickedPairsIsRefinedAndStored) {
 
   // Two pairs: refused. A pair on different anatomy (30 cm off): refused.
   EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], {on_model[0], on_model[1]},
-                                         {on_reconstruction[0], on_reconstruction[1]}, "test"),
+                                         {on_reconstruction[0], on_reconstruction[1]}, Operator{"test", Role::kResearch, false}),
                InputError);
   auto wrong = on_reconstruction;
   wrong[2] += Eigen::Vector3d(0.3, 0, 0);
-  EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], on_model, wrong, "test"), InputError);
+  const Operator research{"test", Role::kResearch, false};
+  EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], on_model, wrong, research), InputError);
+  EXPECT_EQ(db->ListAlignments(reconstructions[0]).size(), stored_before + 2);
+  // Only a role that runs sessions aligns, and only on an open session.
+  EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], on_model, on_reconstruction,
+                                         Operator{"pia", Role::kPhysicist, true}),
+               NotPermitted);
+  EndSession(db.get(), research, run.session_id, SessionStatus::kCompleted, "");
+  EXPECT_THROW(AlignStoredReconstruction(db.get(), reconstructions[0], on_model, on_reconstruction, research),
+               InputError);
   EXPECT_EQ(db->ListAlignments(reconstructions[0]).size(), stored_before + 2);
 }
 
