@@ -75,7 +75,7 @@ TEST_F(Roles, EachRoleDoesItsPartAndAnApprovedPlanStaysAsApproved) {
   EXPECT_TRUE(Contains(r.output, "plan 1 created")) << r.output;
   EXPECT_TRUE(Contains(r.output, "not approved until a physicist approves it")) << r.output;
   // Planning again refines the same unapproved plan: no duplicate.
-  r = As(kTechnician, "plan " + Case() + " --no-keypoints");
+  r = As(kTechnician, "plan " + Case() + "");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_TRUE(Contains(r.output, "plan: plan 1 (the patient's plan not yet approved)")) << r.output;
   EXPECT_EQ(Value(store(), "SELECT COUNT(*) FROM plans"), "1");
@@ -109,7 +109,7 @@ TEST_F(Roles, EachRoleDoesItsPartAndAnApprovedPlanStaysAsApproved) {
   EXPECT_TRUE(Contains(Sql(store(), "INSERT INTO room_maps SELECT * FROM room_maps WHERE plan_id = 1"),
                        "no room map can be added"));
   // Without --plan, planning makes a new plan next to the approved one.
-  r = As(kTechnician, "plan " + Case() + " --no-keypoints");
+  r = As(kTechnician, "plan " + Case() + "");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_TRUE(Contains(r.output, "approved plan(s) cannot be changed): plan 2 created")) << r.output;
 

@@ -131,8 +131,9 @@ TEST_F(GuiTest, PlanningPageRendersTheReferenceModelInBlue) {
 }
 
 // After run-case on the sample session, the session page shows the
-// reconstruction with the reference model aligned to it in red.
-TEST_F(GuiTest, SessionPageShowsTheAlignedModelInRed) {
+// reconstruction coloured by its distance to the aligned model: on the
+// sample's good alignment, mostly green (under 2 mm), little red.
+TEST_F(GuiTest, SessionPageColoursTheSurfaceByItsDistanceToTheAlignedModel) {
   const auto sample = std::filesystem::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion";
   const auto session_store = dir_.path() / "session.db";
   std::string out;
@@ -146,14 +147,16 @@ TEST_F(GuiTest, SessionPageShowsTheAlignedModelInRed) {
       << out;
   const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
   ASSERT_FALSE(shot.empty());
-  int red = 0;
+  int red = 0, green = 0;
   for (int y = 0; y < shot.rows; ++y) {
     for (int x = 0; x < shot.cols; ++x) {
       const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
       if (p[2] > p[0] + 50 && p[2] > p[1] + 50) ++red;
+      if (p[1] > p[0] + 50 && p[1] > p[2] + 50) ++green;
     }
   }
-  EXPECT_GT(red, 300);
+  EXPECT_GT(green, 3000);
+  EXPECT_LT(red, green / 5);
 }
 
 // After run-case, the planning page shows the room map: the mapped room
