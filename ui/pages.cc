@@ -118,7 +118,9 @@ CasePage::CasePage(WizardState* state, QWidget* parent) : QWizardPage(parent), s
     state->op = ResolveOperator("", "research");
   }
   user_edit_ = new QLineEdit(Q(state->op.user), this);
+  user_edit_->setObjectName("user_edit");
   role_combo_ = new QComboBox(this);
+  role_combo_->setObjectName("role_combo");
   for (Role r : {Role::kTechnician, Role::kTherapist, Role::kPhysicist, Role::kResearch}) {
     role_combo_->addItem(Q(RoleName(r)), static_cast<int>(r));
   }
@@ -253,7 +255,9 @@ PlanningPage::PlanningPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   approval_label_ = new QLabel(this);
   approval_label_->setWordWrap(true);
   import_button_ = new QPushButton(tr("Plan the case: build the room map"), this);
+  import_button_->setObjectName("plan_button");
   approve_button_ = new QPushButton(tr("Approve this plan…"), this);
+  approve_button_->setObjectName("approve_button");
   progress_ = new QProgressBar(this);
   progress_->setRange(0, 100);
   cancel_button_ = new QPushButton(tr("Cancel"), this);
@@ -468,11 +472,15 @@ SessionPage::SessionPage(WizardState* state, QWidget* parent) : QWizardPage(pare
   stages_ = new QLabel(this);
   stages_->setWordWrap(true);
   run_button_ = new QPushButton(tr("Run the session stage on the case's body scan"), this);
+  run_button_->setObjectName("run_session_button");
   unapproved_box_ = new QCheckBox(tr("on a plan not approved (recorded)"), this);
+  unapproved_box_->setObjectName("unapproved_box");
   unapproved_box_->setToolTip(tr("Sessions run on approved plans. For tests and research, run on a plan that is "
                                  "not approved; the session and the audit log say so."));
   complete_button_ = new QPushButton(tr("Complete session"), this);
+  complete_button_->setObjectName("complete_session_button");
   abort_button_ = new QPushButton(tr("Abort session…"), this);
+  abort_button_->setObjectName("abort_session_button");
   progress_ = new QProgressBar(this);
   progress_->setRange(0, 100);
   cancel_button_ = new QPushButton(tr("Cancel"), this);
@@ -648,6 +656,9 @@ void SessionPage::initializePage() {
 }
 
 void SessionPage::ListSessions() {
+  shown_session_ = 0;
+  shown_session_open_ = false;
+  UpdateButtons();
   sessions_->setRowCount(0);
   model_view_->ClearMeshes();
   details_->clear();

@@ -40,7 +40,9 @@ struct AuditVerification {
 /// schema created them, that no entry was removed from the end, and that
 /// every clinical row (patients, plans, room maps, sessions, body marker
 /// maps, reconstructions, alignments, tracking runs) has the audit entry
-/// that created it. Reads only.
+/// that created it; from schema 7 also that the triggers locking approved
+/// plans are there and every approved plan and ended session has the entry
+/// that approved or ended it. Reads only.
 AuditVerification VerifyAuditLog(sqlite3* db);
 
 }  // namespace arpos

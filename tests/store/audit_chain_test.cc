@@ -146,6 +146,52 @@ TEST(AuditChain, EachKindOfTamperingIsNamed) {
   EXPECT_TRUE(Verify(path).ok());
 }
 
+// Approvals and session ends are made by the audited controllers
+// (store/lifecycle.h); one made with sqlite3, or a dropped plan trigger, is
+// named.
+TEST(AuditChain, AnApprovalOrASessionEndWrittenPastTheProgramIsNamed) {
+  TempDir dir;
+  const fs::path path = dir.path() / "store.db";
+  {
+    const auto db = SqliteDatabase::Open(path.string());
+    PatientRecord patient;
+    patient.external_id = "P-002";
+    PlanRecord plan;
+    plan.patient_id = db->AddPatient(patient);
+    db->AppendAudit({AuditId(), 0, "tech", "add_patient", "patient:1", ""});
+    plan.name = "plan";
+    plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}};
+    plan.reference_model.faces = {{0, 1, 2}};
+    for (int i = 0; i < 2; ++i) {
+      const PlanId id = db->AddPlan(plan);
+      db->AppendAudit({AuditId(), 0, "tech", "add_plan", "plan:" + std::to_string(id.value()), ""});
+    }
+    SessionRecord session;
+    session.plan_id = PlanId(1);
+    db->AddSession(session);
+    db->AppendAudit({AuditId(), 0, "ana (therapist)", "open_session", "session:1", ""});
+    // Plan 2 approved and the session completed the program's way.
+    db->ApprovePlan(PlanId(2), "pia (physicist)", "");
+    db->AppendAudit({AuditId(), 0, "pia (physicist)", "approve_plan", "plan:2", ""});
+  }
+  EXPECT_TRUE(Verify(path).ok()) << Verify(path).ToText();
+
+  const fs::path forged = CopyOf(path, "forged.db");
+  RawExec(forged, "UPDATE plans SET approved_by = 'pia (physicist)', approved_unix_ms = created_unix_ms + 1 "
+                  "WHERE plan_id = 1; UPDATE sessions SET status = 'completed', ended_unix_ms = started_unix_ms");
+  const AuditVerification v = Verify(forged);
+  EXPECT_FALSE(v.ok());
+  EXPECT_NE(v.ToText().find("plan 1 is marked approved but no approve_plan entry records it"), std::string::npos)
+      << v.ToText();
+  EXPECT_NE(v.ToText().find("session 1 is marked completed but no complete_session entry"), std::string::npos)
+      << v.ToText();
+
+  const fs::path unlocked = CopyOf(path, "unlocked.db");
+  RawExec(unlocked, "DROP TRIGGER plans_approved_are_locked");
+  EXPECT_NE(Verify(unlocked).ToText().find("trigger plans_approved_are_locked is missing"), std::string::npos)
+      << Verify(unlocked).ToText();
+}
+
 TEST(AuditChain, EntriesFromBeforeTheChainAreCountedApartAndTheChainStartsAfterThem) {
   TempDir dir("arpos_audit");
   const fs::path path = dir.path() / "old.db";
