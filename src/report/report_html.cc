@@ -41,6 +41,7 @@ table { border-collapse: collapse; margin: 0.3em 0 0.6em 0; }
 table.data { width: 100%; }
 th, td { border: 1px solid #999; padding: 3px 5px; text-align: left; vertical-align: top; }
 th { background-color: #e8e8e8; font-weight: bold; }
+table.data th, table.data td { font-size: 8.5pt; }
 td.num { text-align: right; }
 table.kv th { width: 14em; }
 table.sign td { border: none; padding: 18px 8px 4px 0; }
@@ -177,6 +178,10 @@ void RunSection(Html& h, const ReportRun& r, std::size_t index, const std::vecto
 }
 
 }  // namespace
+
+std::string PlotName(std::size_t run_index, const std::string& kind) {
+  return "run" + std::to_string(run_index + 1) + "_" + kind + ".png";
+}
 
 std::string HtmlEscape(const std::string& text) {
   std::string out;

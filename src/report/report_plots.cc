@@ -228,10 +228,6 @@ Series Component(const std::vector<ReportFrame>& frames, const QString& name, co
 
 }  // namespace
 
-std::string PlotName(std::size_t run_index, const std::string& kind) {
-  return "run" + std::to_string(run_index + 1) + "_" + kind + ".png";
-}
-
 std::vector<ReportImage> MakeReportPlots(const SessionReport& report) {
   std::vector<ReportImage> images;
   const QColor c1(198, 40, 40), c2(46, 125, 50), c3(21, 101, 192), magnitude(33, 33, 120);

@@ -28,7 +28,8 @@ struct ReportImage {
   int width = 0, height = 0;
 };
 
-/// "run<i+1>_<kind>.png" for run index i (0-based) of SessionReport::runs.
+/// "run<i+1>_<kind>.png" for run index i (0-based) of SessionReport::runs
+/// (defined with the HTML renderer, which needs no Qt).
 std::string PlotName(std::size_t run_index, const std::string& kind);
 
 /// The plots of every run of `report` (runs with no frames have none).

@@ -31,8 +31,8 @@ struct HasApprovedTime : std::false_type {};
 template <typename T>
 struct HasApprovedTime<T, std::void_t<decltype(std::declval<T>().approved_unix_ms)>> : std::true_type {};
 
-std::string TextOf(const std::string& s) { return s; }
-std::string TextOf(const std::optional<std::string>& s) { return s.value_or(std::string()); }
+[[maybe_unused]] std::string TextOf(const std::string& s) { return s; }
+[[maybe_unused]] std::string TextOf(const std::optional<std::string>& s) { return s.value_or(std::string()); }
 template <typename T>
 std::int64_t TimeOf(const T& t) {
   if constexpr (std::is_arithmetic_v<T>) {
