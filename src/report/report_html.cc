@@ -32,26 +32,31 @@ std::string Lines(const std::string& text) {
   return out;
 }
 
+// Styles both the browser and Qt's rich text understand.
 const char* kCss = R"(
-body { font-family: "DejaVu Sans", Arial, Helvetica, sans-serif; font-size: 10pt; color: #111; margin: 1.5em auto; max-width: 60em; }
+body { font-family: "DejaVu Sans", Arial, Helvetica, sans-serif; font-size: 10pt; color: #111; }
 h1 { font-size: 17pt; margin: 0 0 0.3em 0; }
 h2 { font-size: 13pt; margin: 1.2em 0 0.4em 0; border-bottom: 1px solid #888; padding-bottom: 2px; }
 h3 { font-size: 11pt; margin: 1em 0 0.3em 0; }
 table { border-collapse: collapse; margin: 0.3em 0 0.6em 0; }
 table.data { width: 100%; }
-th, td { border: 1px solid #999; padding: 3px 5px; text-align: left; vertical-align: top; }
+th, td { border: 1px solid #999; padding: 3px 4px; text-align: left; vertical-align: top; }
 th { background-color: #e8e8e8; font-weight: bold; }
-table.data th, table.data td { font-size: 8.5pt; }
+table.data th, table.data td { font-size: 8pt; }
 td.num { text-align: right; }
-table.kv th { width: 14em; }
 table.sign td { border: none; padding: 18px 8px 4px 0; }
 p.ok { background-color: #e6f4e6; border: 1px solid #2e7d32; color: #1b5e20; padding: 6px; font-weight: bold; }
 p.bad { background-color: #fdecea; border: 1px solid #c62828; color: #b71c1c; padding: 6px; font-weight: bold; }
 p.note { color: #444; font-size: 9pt; }
+)";
+
+// Only for browsers (Qt's layout of the PDF has its own page margins).
+const char* kBrowserCss = R"(
+body { margin: 1.5em auto; max-width: 60em; padding: 0 1em; }
 img.plot { width: 100%; height: auto; max-width: 1000px; }
 @media print {
-  body { margin: 0; max-width: none; }
-  h2 { page-break-after: avoid; }
+  body { margin: 0; max-width: none; padding: 0; }
+  h2, h3 { page-break-after: avoid; }
   table, img.plot { page-break-inside: avoid; }
   tr { page-break-inside: avoid; }
 }
@@ -71,9 +76,15 @@ class Html {
     out_ << "<tr><th>" << E(key) << "</th><td>" << value_html << "</td></tr>\n";
   }
   void EndTable() { out_ << "</table>\n"; }
-  void BeginData(const std::vector<std::string>& headers) {
-    out_ << "<table class=\"data\" width=\"100%\" border=\"1\" cellspacing=\"0\" cellpadding=\"3\">\n<thead><tr>";
-    for (const std::string& h : headers) out_ << "<th>" << E(h) << "</th>";
+  // A table with a header row (repeated on each PDF page); `widths` in % of
+  // the table, one per column or none.
+  void BeginData(const std::vector<std::string>& headers, const std::vector<int>& widths = {}) {
+    out_ << "<table class=\"data\" width=\"100%\" border=\"1\" cellspacing=\"0\" cellpadding=\"2\">\n<thead><tr>";
+    for (std::size_t i = 0; i < headers.size(); ++i) {
+      out_ << "<th";
+      if (i < widths.size()) out_ << " width=\"" << widths[i] << "%\"";
+      out_ << ">" << E(headers[i]) << "</th>";
+    }
     out_ << "</tr></thead>\n";
   }
   void Row(const std::vector<std::string>& cells_html, const std::vector<bool>& numeric = {}) {
@@ -123,14 +134,20 @@ void Image(Html& h, const ReportImage& image, ReportImageMode mode) {
 
 void CorrectionRow(Html& h, const std::string& what, const std::optional<ReportFrame>& f) {
   if (!f || !f->correction) {
-    h.Row({E(what), "-", "-", "-", "-", "-", "-", "-", "-", "-"});
+    h.Row({E(what), "-", "-", "-", "-", "-", "-", "-", "-"});
     return;
   }
   const Correction6Dof& c = *f->correction;
   h.Row({E(what), std::to_string(f->frame_index), Fixed(f->time_s, 2), Fixed(c.translation_mm.x(), 1),
-         Fixed(c.translation_mm.y(), 1), Fixed(c.translation_mm.z(), 1), Fixed(c.translation_mm.norm(), 1),
-         Fixed(c.rotation_deg.x(), 2), Fixed(c.rotation_deg.y(), 2), Fixed(c.rotation_deg.z(), 2)},
-        {false, true, true, true, true, true, true, true, true, true});
+         Fixed(c.translation_mm.y(), 1), Fixed(c.translation_mm.z(), 1), Fixed(c.rotation_deg.x(), 2),
+         Fixed(c.rotation_deg.y(), 2), Fixed(c.rotation_deg.z(), 2)},
+        {false, true, true, true, true, true, true, true, true});
+}
+
+std::string Magnitudes(const std::optional<ReportFrame>& f) {
+  if (!f || !f->correction) return "-";
+  return Fixed(f->correction->translation_mm.norm(), 1) + " mm, " + Fixed(f->correction->rotation_deg.norm(), 2) +
+         " deg (frame " + std::to_string(f->frame_index) + ", t = " + Fixed(f->time_s, 2) + " s)";
 }
 
 void RunSection(Html& h, const ReportRun& r, std::size_t index, const std::vector<ReportImage>& images,
@@ -152,8 +169,10 @@ void RunSection(Html& h, const ReportRun& r, std::size_t index, const std::vecto
   h.Kv("Time in tolerance", Fixed(r.time_in_tolerance_s, 2) + " s of " + Fixed(r.duration_s, 2) + " s (" +
                                 (r.duration_s > 0 ? Fixed(100.0 * r.time_in_tolerance_s / r.duration_s, 1) : "0.0") +
                                 " % of the time; " + Percent(r.num_in, r.num_frames) + " of the frames)");
+  h.Kv("First correction", Magnitudes(r.first_correction));
+  h.Kv("Last correction", Magnitudes(r.last_correction));
   h.Kv("Largest correction", r.first_correction ? Fixed(r.max_translation_mm, 1) + " mm, " +
-                                                      Fixed(r.max_rotation_deg, 2) + " deg"
+                                                      Fixed(r.max_rotation_deg, 2) + " deg (each over the run)"
                                                 : std::string("none (no frame with a pose)"));
   h.Kv("Latency per frame (total_ms)",
        r.latency_mean_ms ? "mean " + Fixed(*r.latency_mean_ms, 1) + " ms, p95 " + Fixed(*r.latency_p95_ms, 1) +
@@ -163,8 +182,9 @@ void RunSection(Html& h, const ReportRun& r, std::size_t index, const std::vecto
   h << "<p class=\"note\">Corrections in the couch axes (IEC 61217): translation lateral, longitudinal, "
        "vertical; rotation pitch, roll, yaw (components of the rotation vector). The last row is the "
        "correction the couch was left with.</p>\n";
-  h.BeginData({"Correction", "Frame", "Time (s)", "Lateral (mm)", "Longitudinal (mm)", "Vertical (mm)", "|t| (mm)",
-               "Pitch (deg)", "Roll (deg)", "Yaw (deg)"});
+  h.BeginData({"Correction", "Frame", "Time (s)", "Lateral (mm)", "Longitudinal (mm)", "Vertical (mm)", "Pitch (deg)",
+               "Roll (deg)", "Yaw (deg)"},
+              {12, 8, 7, 12, 14, 12, 11, 11, 11});
   CorrectionRow(h, "first", r.first_correction);
   CorrectionRow(h, "last", r.last_correction);
   h.EndTable();
@@ -226,7 +246,8 @@ std::string Base64Encode(const std::string& bytes) {
 std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportImage>& images, ReportImageMode mode) {
   Html h;
   h << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" << E(r.title) << ", session "
-    << std::to_string(r.session.id.value()) << "</title>\n<style>" << kCss << "</style>\n</head>\n<body>\n";
+    << std::to_string(r.session.id.value()) << "</title>\n<style>" << kCss << (mode == ReportImageMode::kDataUri ? kBrowserCss : "")
+    << "</style>\n</head>\n<body>\n";
   h << "<h1>" << E(r.title) << "</h1>\n";
   h.BeginKv();
   h.Kv("Generated", E(Time(r.generated_unix_ms)));
@@ -312,19 +333,21 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
     h << "<p>None.</p>\n";
   } else {
     h << "<p class=\"note\">The model pose at scan is the reference model in the reconstruction's (body scan) "
-         "frame: translation x, y, z and rotation vector. Fitness is the inlier fraction; RMSE is over the "
-         "inliers.</p>\n";
-    h.BeginData({"Id", "Recon.", "From", "Method", "Fitness (0-1)", "RMSE (mm)", "Inliers",
-                 "Model pose at scan: translation (mm)", "Rotation (deg)", "Created", "Used by tracking"});
+         "frame: translation t (x, y, z) and rotation vector r. Fitness is the inlier fraction; RMSE is over the "
+         "inliers. \"Refines\" names the alignment a refinement started from.</p>\n";
+    h.BeginData({"Id", "Method", "Refines", "Fitness (0-1)", "RMSE (mm)", "Inliers", "Model pose at scan",
+                 "Used by tracking"},
+                {5, 11, 9, 9, 8, 8, 38, 12});
     for (const ReportReconstruction& rec : r.reconstructions) {
       for (const ReportAlignment& ra : rec.alignments) {
         const AlignmentRecord& a = ra.record;
-        h.Row({std::to_string(a.id.value()), std::to_string(a.reconstruction_id.value()),
-               a.parent_alignment_id ? std::to_string(a.parent_alignment_id->value()) : "-", E(ToString(a.method)),
-               Fixed(a.fitness, 3), Fixed(a.rmse_m * 1000.0, 2), std::to_string(a.num_inliers),
-               PoseTranslationMm(a.reconstruction_from_model), PoseRotationDeg(a.reconstruction_from_model),
-               E(Time(a.created_unix_ms)), ra.used_by_tracking ? "yes" : "no"},
-              {true, true, true, false, true, true, true, false, false, false, false});
+        h.Row({std::to_string(a.id.value()), E(ToString(a.method)),
+               a.parent_alignment_id ? std::to_string(a.parent_alignment_id->value()) : "-", Fixed(a.fitness, 3),
+               Fixed(a.rmse_m * 1000.0, 2), std::to_string(a.num_inliers),
+               "t (mm): " + PoseTranslationMm(a.reconstruction_from_model) +
+                   "<br>r (deg): " + PoseRotationDeg(a.reconstruction_from_model),
+               ra.used_by_tracking ? "yes" : "no"},
+              {true, false, true, true, true, true, false, false});
       }
     }
     h.EndTable();
@@ -335,19 +358,13 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
   if (r.runs.empty()) {
     h << "<p>No tracking runs in this session.</p>\n";
   } else {
-    h.BeginData({"Run", "Frames", "Tracked", "Carried", "Lost", "In tolerance (frames)", "In tolerance (s)",
-                 "Tolerance (mm / deg)", "Last |t| (mm)", "Last angle (deg)"});
-    for (const ReportRun& run : r.runs) {
-      const bool last = run.last_correction && run.last_correction->correction;
-      h.Row({E(run.name), std::to_string(run.num_frames), CountPercent(run.num_tracked, run.num_frames),
-             CountPercent(run.num_carried, run.num_frames), CountPercent(run.num_lost, run.num_frames),
-             CountPercent(run.num_in, run.num_frames), Fixed(run.time_in_tolerance_s, 2) + " of " + Fixed(run.duration_s, 2),
-             Fixed(run.run.tolerance_translation_mm, 1) + " / " + Fixed(run.run.tolerance_rotation_deg, 1),
-             last ? Fixed(run.last_correction->correction->translation_mm.norm(), 1) : "-",
-             last ? Fixed(run.last_correction->correction->rotation_deg.norm(), 2) : "-"},
-            {false, true, true, true, true, true, true, true, true, true});
+    h << "<p>" << std::to_string(r.runs.size()) << (r.runs.size() == 1 ? " tracking run: " : " tracking runs: ");
+    for (std::size_t i = 0; i < r.runs.size(); ++i) {
+      const ReportRun& run = r.runs[i];
+      h << (i > 0 ? "; " : "") << "<b>" << E(run.name) << "</b> (" << std::to_string(run.num_frames) << " frames, "
+        << Percent(run.num_in, run.num_frames) << " in tolerance)";
     }
-    h.EndTable();
+    h << ".</p>\n";
     h << "<p class=\"note\">Tracked, carried and lost count the frames by where their pose came from (measured "
          "in the frame, carried over from earlier frames, none); in tolerance counts the frames whose "
          "correction plus its uncertainty was within both tolerances. Time in tolerance sums, over the frames "
@@ -363,7 +380,7 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
   if (r.audit.empty()) {
     h << "<p>No audit entries.</p>\n";
   } else {
-    h.BeginData({"Id", "Time (UTC)", "Actor", "Action", "Entity", "Details"});
+    h.BeginData({"Id", "Time (UTC)", "Actor", "Action", "Entity", "Details"}, {4, 13, 12, 21, 18, 32});
     for (const AuditEntry& e : r.audit) {
       const bool bad = r.verification.first_bad_entry == e.id.value();
       std::string id = std::to_string(e.id.value());
@@ -380,8 +397,17 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
     h << "</ul>\n";
   }
 
-  // Signature.
-  h << "<h2>Review and signature</h2>\n";
+  // Signature: on a page of its own, naming what is signed.
+  h << "<h2 style=\"page-break-before: always\">Review and signature</h2>\n";
+  h.BeginKv();
+  h.Kv("Patient", E(r.patient.external_id) +
+                      (r.patient.display_name.empty() ? std::string() : ", " + E(r.patient.display_name)));
+  h.Kv("Plan", E(r.plan.name) + " (id " + std::to_string(r.plan.id.value()) + ")");
+  h.Kv("Session", std::to_string(r.session.id.value()) + ", fraction " + std::to_string(r.session.fraction) + ", " +
+                      E(Time(r.session.started_unix_ms)));
+  h.Kv("Report generated", E(Time(r.generated_unix_ms)) + " by arpos " + E(r.program_version));
+  h.EndTable();
+  h << "<p class=\"" << (r.verification.ok() ? "ok" : "bad") << "\">" << E(r.verification_line) << "</p>\n";
   h << "<p>I have reviewed this session's positioning record.</p>\n";
   h << "<table class=\"sign\" width=\"100%\" border=\"0\" cellspacing=\"0\" cellpadding=\"8\">\n";
   for (const char* line : {"Name", "Role", "Date", "Signature"}) {

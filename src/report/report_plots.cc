@@ -75,7 +75,9 @@ void DrawPanel(QPainter& p, const QRectF& area, const Panel& panel, const std::v
   lo = std::floor(lo / step) * step;
   hi = std::ceil(hi / step) * step;
   const double xs = x_max > 0 ? x_max : 1.0;
-  auto X = [&](double t) { return plot.left() + plot.width() * t / xs; };
+  // A margin on both sides, so that the first and last frames' dots show whole.
+  const double x_lo = -0.02 * xs, x_hi = 1.02 * xs;
+  auto X = [&](double t) { return plot.left() + plot.width() * (t - x_lo) / (x_hi - x_lo); };
   auto Y = [&](double v) { return plot.bottom() - plot.height() * (v - lo) / (hi - lo); };
 
   // Title and frame.
@@ -90,25 +92,33 @@ void DrawPanel(QPainter& p, const QRectF& area, const Panel& panel, const std::v
   p.fillRect(plot, QColor(252, 252, 252));
 
   // Lost frames: grey bars over the whole height.
+  // Lost frames: grey bars over the whole height, each from half-way to the
+  // frame before to half-way to the frame after (at least 2 px wide).
   p.setPen(Qt::NoPen);
-  const double bar = std::max(2.0, plot.width() / std::max<std::size_t>(frames.size(), 1) * 0.9);
-  for (const ReportFrame& f : frames) {
-    if (f.status == TrackingFrameStatus::kLost) {
-      p.fillRect(QRectF(X(f.time_s) - bar / 2, plot.top(), bar, plot.height()), QColor(150, 150, 150, 90));
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (frames[i].status != TrackingFrameStatus::kLost) continue;
+    const double t = frames[i].time_s;
+    const double a = i > 0 ? (frames[i - 1].time_s + t) / 2 : t;
+    const double b = i + 1 < frames.size() ? (t + frames[i + 1].time_s) / 2 : t;
+    double left = X(a), right = X(b);
+    if (right - left < 2) {
+      left = X(t) - 1;
+      right = X(t) + 1;
     }
+    p.fillRect(QRectF(left, plot.top(), right - left, plot.height()), QColor(150, 150, 150, 90));
   }
 
   // Grid and ticks.
   p.setPen(QPen(QColor(220, 220, 220), 1));
   for (double v = lo; v <= hi + step * 1e-6; v += step) p.drawLine(QPointF(plot.left(), Y(v)), QPointF(plot.right(), Y(v)));
   const double x_step = NiceStep(xs, 8);
-  for (double t = 0; t <= xs + x_step * 1e-6; t += x_step) p.drawLine(QPointF(X(t), plot.top()), QPointF(X(t), plot.bottom()));
+  for (double t = 0; t <= x_hi; t += x_step) p.drawLine(QPointF(X(t), plot.top()), QPointF(X(t), plot.bottom()));
   p.setPen(Qt::black);
   for (double v = lo; v <= hi + step * 1e-6; v += step) {
     const QString text = TickText(v, step);
     p.drawText(QPointF(plot.left() - 8 - fm.horizontalAdvance(text), Y(v) + fm.ascent() / 2 - 2), text);
   }
-  for (double t = 0; t <= xs + x_step * 1e-6; t += x_step) {
+  for (double t = 0; t <= x_hi; t += x_step) {
     const QString text = TickText(t, x_step);
     p.drawText(QPointF(X(t) - fm.horizontalAdvance(text) / 2, plot.bottom() + fm.ascent() + 4), text);
   }
@@ -160,6 +170,14 @@ void DrawPanel(QPainter& p, const QRectF& area, const Panel& panel, const std::v
     }
     p.setPen(QPen(s.color, 2));
     p.drawPath(path);
+    if (!panel.status_dots) {  // small dots, so that a frame between lost ones shows
+      p.setPen(Qt::NoPen);
+      p.setBrush(s.color);
+      for (std::size_t i = 0; i < frames.size() && i < s.y.size(); ++i) {
+        if (std::isfinite(s.y[i])) p.drawEllipse(QPointF(X(frames[i].time_s), Y(s.y[i])), 3.0, 3.0);
+      }
+      p.setBrush(Qt::NoBrush);
+    }
   }
   if (panel.status_dots && !panel.series.empty()) {
     const Series& s = panel.series.front();
@@ -167,14 +185,17 @@ void DrawPanel(QPainter& p, const QRectF& area, const Panel& panel, const std::v
     for (std::size_t i = 0; i < frames.size() && i < s.y.size(); ++i) {
       if (!std::isfinite(s.y[i])) continue;
       p.setBrush(frames[i].status == TrackingFrameStatus::kInTolerance ? QColor(46, 125, 50) : QColor(239, 108, 0));
-      p.drawEllipse(QPointF(X(frames[i].time_s), Y(s.y[i])), 3.0, 3.0);
+      p.drawEllipse(QPointF(X(frames[i].time_s), Y(s.y[i])), 4.5, 4.5);
     }
   }
   p.setClipping(false);
   p.setBrush(Qt::NoBrush);
 
   for (const Series& s : panel.series) legend(s.color, Qt::SolidLine, s.name, false);
-  if (panel.tolerance) legend(QColor(200, 0, 0), Qt::DashLine, QStringLiteral("tolerance %1").arg(*panel.tolerance), false);
+  if (panel.tolerance) {
+    legend(QColor(200, 0, 0), Qt::DashLine, QStringLiteral("tolerance %1 %2").arg(*panel.tolerance).arg(panel.y_label),
+           false);
+  }
   if (panel.status_dots) {
     legend(QColor(46, 125, 50), Qt::SolidLine, QStringLiteral("in tolerance"), true);
     legend(QColor(239, 108, 0), Qt::SolidLine, QStringLiteral("out of tolerance"), true);

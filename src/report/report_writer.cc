@@ -5,6 +5,7 @@
 #include <QBuffer>
 #include <QByteArray>
 #include <QCoreApplication>
+#include <QtGlobal>
 #include <QFont>
 #include <QGuiApplication>
 #include <QImage>
@@ -61,6 +62,19 @@ void CheckReportOutputWritable(const std::string& path) {
   }
 }
 
+namespace {
+
+QtMessageHandler previous_handler = nullptr;
+
+// Drops Qt's note that XDG_RUNTIME_DIR is not set (the offscreen platform
+// does not need it); passes everything else on.
+void ReportMessageHandler(QtMsgType type, const QMessageLogContext& context, const QString& message) {
+  if (message.startsWith(QLatin1String("QStandardPaths: XDG_RUNTIME_DIR not set"))) return;
+  if (previous_handler != nullptr) previous_handler(type, context, message);
+}
+
+}  // namespace
+
 void EnsureGuiApplication() {
   if (QCoreApplication* app = QCoreApplication::instance()) {
     ARPOS_CHECK(qobject_cast<QGuiApplication*>(app) != nullptr,
@@ -69,6 +83,7 @@ void EnsureGuiApplication() {
   }
   // No display is needed to draw plots and lay out a PDF.
   qputenv("QT_QPA_PLATFORM", "offscreen");
+  previous_handler = qInstallMessageHandler(ReportMessageHandler);
   static int argc = 1;
   static char name[] = "arpos";
   static char* argv[] = {name, nullptr};

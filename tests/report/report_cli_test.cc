@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <regex>
 
@@ -35,6 +36,14 @@ std::size_t Count(const std::string& text, const std::string& what) {
   return n;
 }
 
+// With ARPOS_REPORT_TEST_KEEP=DIR set, the reports are also copied there, to
+// look at.
+void Keep(const fs::path& file) {
+  if (const char* dir = std::getenv("ARPOS_REPORT_TEST_KEEP")) {
+    fs::copy_file(file, fs::path(dir) / file.filename(), fs::copy_options::overwrite_existing);
+  }
+}
+
 struct Store {
   TempDir dir{"arpos_report_cli"};
   fs::path path = dir.path() / "store.db";
@@ -56,6 +65,7 @@ TEST(ReportCli, HtmlHoldsTheSessionPlotsAndAVerifiedLog) {
   const testing::CliResult r = RunArpos(s.Report(out.string()));
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_NE(r.output.find("written to " + out.string()), std::string::npos) << r.output;
+  Keep(out);
   const std::string html = ReadTextFile(out);
   EXPECT_EQ(html.rfind("<!DOCTYPE html>", 0), 0u);
   EXPECT_NE(html.find("P-REPORT-7"), std::string::npos);
@@ -111,6 +121,7 @@ TEST(ReportCli, PdfHasPages) {
   const fs::path out = s.dir.path() / "report.pdf";
   const testing::CliResult r = RunArpos(s.Report(out.string()));
   ASSERT_EQ(r.status, 0) << r.output;
+  Keep(out);
   const std::string pdf = ReadTextFile(out);
   EXPECT_EQ(pdf.rfind("%PDF-", 0), 0u);
   const std::size_t pages = Count(pdf, "/Type /Page") - Count(pdf, "/Type /Pages");
