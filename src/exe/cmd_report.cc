@@ -1,5 +1,6 @@
 #include "exe/cmd_report.h"
 
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
@@ -12,6 +13,8 @@
 
 namespace arpos {
 namespace {
+
+namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
     "Usage: arpos report SESSION_ID [--store DB] --out FILE.html|FILE.pdf\n"
@@ -81,7 +84,11 @@ int Run(const std::vector<std::string>& argv, std::ostream& out, std::ostream& e
   SqliteOpenOptions options;
   options.create_if_missing = false;  // a report must not leave a new empty store behind
   const std::unique_ptr<SqliteDatabase> database = SqliteDatabase::Open(store_path, options);
-  const SessionReport report = GatherSessionReport(database.get(), SessionId(*id), store_path);
+  // The report names the store by its absolute path: it outlives the working directory.
+  std::error_code ec;
+  const fs::path absolute = fs::absolute(store_path, ec);
+  const SessionReport report =
+      GatherSessionReport(database.get(), SessionId(*id), ec ? store_path : absolute.lexically_normal().string());
   WriteSessionReport(report, *format, *out_path);
   out << "report of session " << *id << " written to " << *out_path << " (" << report.runs.size()
       << " tracking run" << (report.runs.size() == 1 ? "" : "s") << ", " << report.audit.size()
