@@ -44,6 +44,7 @@ th, td { border: 1px solid #999; padding: 3px 4px; text-align: left; vertical-al
 th { background-color: #e8e8e8; font-weight: bold; }
 table.data th, table.data td { font-size: 8pt; }
 td.num { text-align: right; }
+tr.bad td { background-color: #fdd8d8; }
 table.sign td { border: none; padding: 18px 8px 4px 0; }
 p.ok { background-color: #e6f4e6; border: 1px solid #2e7d32; color: #1b5e20; padding: 6px; font-weight: bold; }
 p.bad { background-color: #fdecea; border: 1px solid #c62828; color: #b71c1c; padding: 6px; font-weight: bold; }
@@ -87,8 +88,9 @@ class Html {
     }
     out_ << "</tr></thead>\n";
   }
-  void Row(const std::vector<std::string>& cells_html, const std::vector<bool>& numeric = {}) {
-    out_ << "<tr>";
+  void Row(const std::vector<std::string>& cells_html, const std::vector<bool>& numeric = {},
+           bool highlight = false) {
+    out_ << (highlight ? "<tr class=\"bad\" bgcolor=\"#fdd8d8\">" : "<tr>");
     for (std::size_t i = 0; i < cells_html.size(); ++i) {
       const bool num = i < numeric.size() && numeric[i];
       out_ << (num ? "<td class=\"num\" align=\"right\">" : "<td>") << cells_html[i] << "</td>";
@@ -380,13 +382,12 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
   if (r.audit.empty()) {
     h << "<p>No audit entries.</p>\n";
   } else {
-    h.BeginData({"Id", "Time (UTC)", "Actor", "Action", "Entity", "Details"}, {4, 13, 12, 21, 18, 32});
+    h.BeginData({"Id", "Time (UTC)", "Actor", "Action", "Entity", "Details"}, {4, 13, 12, 23, 18, 30});
     for (const AuditEntry& e : r.audit) {
       const bool bad = r.verification.first_bad_entry == e.id.value();
-      std::string id = std::to_string(e.id.value());
-      if (bad) id = "<b>" + id + " (does not verify)</b>";
-      h.Row({id, E(FormatUtcTime(e.time_unix_ms)), E(e.actor), E(e.action), E(e.entity), Lines(e.details)},
-            {true, false, false, false, false, false});
+      h.Row({std::to_string(e.id.value()), E(FormatUtcTime(e.time_unix_ms)), E(e.actor), E(e.action), E(e.entity),
+             (bad ? std::string("<b>This entry does not verify.</b><br>") : std::string()) + Lines(e.details)},
+            {true, false, false, false, false, false}, bad);
     }
     h.EndTable();
   }

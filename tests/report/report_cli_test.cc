@@ -101,7 +101,11 @@ TEST(ReportCli, TamperedStoreDoesNotVerify) {
   const std::string html = ReadTextFile(out);
   EXPECT_NE(html.find("Audit log does not verify"), std::string::npos);
   EXPECT_EQ(html.find("Audit log verifies"), std::string::npos);
-  EXPECT_NE(html.find("3 (does not verify)"), std::string::npos) << "the forged entry is marked";
+  const std::size_t marked = html.find("<tr class=\"bad\"");
+  ASSERT_NE(marked, std::string::npos) << "the forged entry's row is marked";
+  EXPECT_EQ(html.find("<tr class=\"bad\"", marked + 1), std::string::npos) << "one row only";
+  EXPECT_EQ(html.find("<td class=\"num\" align=\"right\">3</td>", marked), html.find("<td", marked));
+  EXPECT_NE(html.find("<b>This entry does not verify.</b><br>forged", marked), std::string::npos);
   EXPECT_NE(r.output.find("does not verify"), std::string::npos) << r.output;
 
   // Only a trigger dropped: the chain is intact, the log still does not verify.
