@@ -640,7 +640,7 @@ void AuditPage::initializePage() {
 }
 
 void AuditPage::ExportReport() {
-  // The session report of `arpos report` (src/report), for a session the user picks (newest first).
+  // The session report of `arpos report` (src/report), for the only session or one the user picks (newest first).
   if (!state_->database) return;
   const std::vector<SessionRecord> sessions = state_->database->ListSessions();
   if (sessions.empty()) {
@@ -655,10 +655,14 @@ void AuditPage::ExportReport() {
                  .arg(ToString(s.status))
                  .arg(Q(FormatUtcTime(s.started_unix_ms)));
   }
-  bool chosen = false;
-  const QString item = QInputDialog::getItem(this, tr("Export report"), tr("Session:"), items, 0, false, &chosen);
-  if (!chosen) return;
-  const SessionRecord& session = sessions[static_cast<std::size_t>(items.indexOf(item))];
+  int index = 0;
+  if (sessions.size() > 1) {
+    bool chosen = false;
+    const QString item = QInputDialog::getItem(this, tr("Export report"), tr("Session:"), items, 0, false, &chosen);
+    if (!chosen) return;
+    index = items.indexOf(item);
+  }
+  const SessionRecord& session = sessions[static_cast<std::size_t>(index)];
   const QString path = QFileDialog::getSaveFileName(this, tr("Export report"),
                                                     QString("arpos_report_session_%1.pdf").arg(session.id.value()),
                                                     tr("PDF (*.pdf);;HTML (*.html)"));
