@@ -32,8 +32,10 @@ constexpr const char* kUsage =
     "  --out FILE          The report, ending in .html or .pdf.\n"
     "  -h, --help          Show this help.\n"
     "\n"
-    "Exit status: 0 written, 2 usage or input error (unknown session, bad output\n"
-    "name or folder, no store), 1 the report could not be made.\n";
+    "Exit status: 0 written (also when the audit log does not verify: the report\n"
+    "says so in red, and so does the last line printed), 2 usage or input error\n"
+    "(unknown session, bad output name or folder, no store), 1 the report could\n"
+    "not be made.\n";
 
 // SESSION_ID as a positive integer, or nullopt.
 std::optional<std::int64_t> ParseId(const std::string& text) {

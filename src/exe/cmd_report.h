@@ -6,7 +6,8 @@
 ///
 ///   arpos report SESSION_ID [--store DB] --out FILE.html|FILE.pdf
 ///
-/// Exit status: 0 written; 2 usage or input error (no such session, an
+/// Exit status: 0 written (also when the audit log does not verify: the
+/// report's verification line says so); 2 usage or input error (no such session, an
 /// output that is neither .html nor .pdf or cannot be written, no store at
 /// DB); 1 if the report could not be made. The output is checked before any
 /// work and written atomically: on an error nothing is written.
