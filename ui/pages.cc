@@ -8,6 +8,7 @@
 #include <QFormLayout>
 #include <QHBoxLayout>
 #include <QHeaderView>
+#include <QInputDialog>
 #include <QLabel>
 #include <QLineEdit>
 #include <QListWidget>
@@ -29,6 +30,8 @@
 #include "registration/kdtree.h"
 #include "registration/mesh_cloud.h"
 #include "geometry/so3.h"
+#include "report/report_writer.h"
+#include "report/session_report.h"
 #include "sensor/case_check.h"
 #include "sensor/case_folder.h"
 #include "room_map/plan_stage.h"
@@ -947,16 +950,42 @@ void AuditPage::initializePage() {
 }
 
 void AuditPage::ExportReport() {
-  const QString path = QFileDialog::getSaveFileName(this, tr("Export report"), "arpos_report.txt",
-                                                    tr("Text (*.txt)"));
-  if (path.isEmpty() || !state_->database) return;
-  std::ofstream out(path.toStdString());
-  out << DescribeStore(*state_->database, 50) << "\n" << Verify().ToText() << "\nAudit log\n";
-  for (const auto& e : state_->database->ListAudit()) {
-    out << FormatUtcTime(e.time_unix_ms) << "  " << e.actor << "  " << e.action << "  " << e.entity << "  "
-        << e.details << "\n";
+  // The session report of `arpos report` (src/report), for the only session or one the user picks (newest first).
+  if (!state_->database) return;
+  const std::vector<SessionRecord> sessions = state_->database->ListSessions();
+  if (sessions.empty()) {
+    QMessageBox::information(this, tr("Export report"), tr("The store has no session to report."));
+    return;
   }
-  if (!out) QMessageBox::critical(this, tr("Export report"), tr("Could not write %1").arg(path));
+  QStringList items;
+  for (const SessionRecord& s : sessions) {
+    items << tr("Session %1: fraction %2, %3, started %4")
+                 .arg(s.id.value())
+                 .arg(s.fraction)
+                 .arg(ToString(s.status))
+                 .arg(Q(FormatUtcTime(s.started_unix_ms)));
+  }
+  int index = 0;
+  if (sessions.size() > 1) {
+    bool chosen = false;
+    const QString item = QInputDialog::getItem(this, tr("Export report"), tr("Session:"), items, 0, false, &chosen);
+    if (!chosen) return;
+    index = items.indexOf(item);
+  }
+  const SessionRecord& session = sessions[static_cast<std::size_t>(index)];
+  const QString path = QFileDialog::getSaveFileName(this, tr("Export report"),
+                                                    QString("arpos_report_session_%1.pdf").arg(session.id.value()),
+                                                    tr("PDF (*.pdf);;HTML (*.html)"));
+  if (path.isEmpty()) return;
+  try {
+    const std::optional<ReportFormat> format = ReportFormatForPath(path.toStdString());
+    if (!format) ARPOS_INPUT_ERROR("the report's file name must end in .html or .pdf: " << path.toStdString());
+    CheckReportOutputWritable(path.toStdString());
+    WriteSessionReport(GatherSessionReport(state_->database.get(), session.id, state_->options.store_path), *format,
+                       path.toStdString());
+  } catch (const std::exception& e) {
+    QMessageBox::critical(this, tr("Export report"), Q(e.what()));
+  }
 }
 
 }  // namespace arpos::ui

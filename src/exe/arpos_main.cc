@@ -31,6 +31,9 @@
 #ifdef ARPOS_HAVE_TRACKING
 #include "exe/cmd_track.h"
 #endif
+#ifdef ARPOS_HAVE_REPORT
+#include "exe/cmd_report.h"
+#endif
 
 namespace {
 
@@ -69,6 +72,9 @@ const std::vector<Command>& Commands() {
 #ifdef ARPOS_HAVE_STORE
       {"store", "inspect the session store (store info)", arpos::RunStoreCommand},
       {"audit", "check the audit log's hash chain and coverage (audit verify)", arpos::RunAuditCommand},
+#endif
+#ifdef ARPOS_HAVE_REPORT
+      {"report", "the signed session report (HTML or PDF): figures, plots, audit trail", arpos::RunReportCommand},
 #endif
   };
   return commands;

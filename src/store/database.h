@@ -145,6 +145,8 @@ class Database {
   // Tracking ----------------------------------------------------------------
   virtual TrackingRunId AddTrackingRun(const TrackingRunRecord& run) = 0;
   virtual std::optional<TrackingRunRecord> GetTrackingRun(TrackingRunId id) = 0;
+  /// Ids of a session's tracking runs, oldest first (by id).
+  virtual std::vector<TrackingRunId> ListTrackingRunIds(SessionId session) = 0;
   /// Appends a batch of frames to a run in one transaction: all or none.
   /// Frame indices must be new within the run. Throws arpos::Error before
   /// writing anything if a frame breaks the rules of TrackingFrameRecord

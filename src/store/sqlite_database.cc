@@ -895,6 +895,15 @@ std::optional<TrackingRunRecord> SqliteDatabase::GetTrackingRun(TrackingRunId id
   return run;
 }
 
+std::vector<TrackingRunId> SqliteDatabase::ListTrackingRunIds(SessionId session) {
+  SqliteStatementGuard s(Prepared(
+      "SELECT tracking_run_id FROM tracking_runs WHERE session_id = ?1 ORDER BY tracking_run_id"));
+  s->BindId(1, session);
+  std::vector<TrackingRunId> ids;
+  while (s->Step()) ids.emplace_back(s->ColumnInt64(0));
+  return ids;
+}
+
 void SqliteDatabase::AppendTrackingFrames(TrackingRunId run,
                                           const std::vector<TrackingFrameRecord>& frames) {
   for (const TrackingFrameRecord& frame : frames) {

@@ -104,6 +104,7 @@ class SqliteDatabase final : public Database {
 
   TrackingRunId AddTrackingRun(const TrackingRunRecord& run) override;
   std::optional<TrackingRunRecord> GetTrackingRun(TrackingRunId id) override;
+  std::vector<TrackingRunId> ListTrackingRunIds(SessionId session) override;
   void AppendTrackingFrames(TrackingRunId run,
                             const std::vector<TrackingFrameRecord>& frames) override;
   std::vector<TrackingFrameRecord> GetTrackingFrames(TrackingRunId run) override;

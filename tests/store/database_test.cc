@@ -82,6 +82,9 @@ TEST_P(StoreKindTest, SeveralCasesKeepTheirOwnRows) {
   EXPECT_EQ(db->ListBodyMarkerMapIds(a.session.id), std::vector<BodyMarkerMapId>{a.body_marker_map.id});
   EXPECT_EQ(db->ListReconstructionIds(b.session.id), std::vector<ReconstructionId>{b.reconstruction.id});
   EXPECT_TRUE(db->ListReconstructionIds(SessionId(999)).empty());
+  EXPECT_EQ(db->ListTrackingRunIds(a.session.id), std::vector<TrackingRunId>{a.tracking_run.id});
+  EXPECT_EQ(db->ListTrackingRunIds(b.session.id), std::vector<TrackingRunId>{b.tracking_run.id});
+  EXPECT_TRUE(db->ListTrackingRunIds(SessionId(999)).empty());
   EXPECT_EQ(db->ListPlans().size(), 2u);
   EXPECT_EQ(db->ListPlans(a.patient.id).size(), 1u);
   EXPECT_EQ(db->ListPlans(a.patient.id)[0].id, a.plan.id);
