@@ -15,13 +15,11 @@ class QListWidget;
 class QPlainTextEdit;
 class QProgressBar;
 class QPushButton;
-class QSlider;
 class QTableWidget;
 class QComboBox;
 
 namespace arpos::ui {
 
-class FrameView;
 class ModelView;
 
 class CasePage : public QWizardPage {
@@ -85,23 +83,6 @@ class SessionPage : public QWizardPage {
   QPushButton* clear_picks_button_;
   long long shown_reconstruction_ = 0;
   std::vector<Eigen::Vector3d> model_picks_, reconstruction_picks_;
-};
-
-class TrackingPage : public QWizardPage {
-  Q_OBJECT
- public:
-  TrackingPage(WizardState* state, QWidget* parent = nullptr);
-  void initializePage() override;
-
- private:
-  void LoadSequence();
-  void ShowFrame(int index);
-  WizardState* state_;
-  QComboBox* sequences_;
-  QSlider* slider_;
-  FrameView* color_view_;
-  FrameView* depth_view_;
-  QLabel* frame_label_;
 };
 
 class AuditPage : public QWizardPage {

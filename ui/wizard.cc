@@ -2,6 +2,7 @@
 
 #include "store/sqlite_database.h"
 #include "ui/pages.h"
+#include "ui/tracking_page.h"
 #include "ui/worker.h"
 
 namespace arpos::ui {

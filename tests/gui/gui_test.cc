@@ -3,7 +3,11 @@
 #include <sqlite3.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdlib>
+#include <iostream>
+#include <optional>
+#include <vector>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
@@ -181,6 +185,169 @@ TEST_F(GuiTest, PlanningPageShowsTheRoomMapMarkers) {
   }
   // Four or more markers of ~15 px squares seen from above.
   EXPECT_GT(orange, 200);
+}
+
+// ---------------------------------------------------------------- tracking page
+// The live positioning screen on the sample: a store filled once by
+// run-case (plan, session, alignment), copied for each test.
+class TrackingPageTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    if (!std::getenv("DISPLAY")) return;
+    suite_dir_ = new TempDir("arpos_gui_tracking");
+    std::string out;
+    suite_ok_ = RunArpos("run-case " + Sample().string() + " --store " + (suite_dir_->path() / "store.db").string(),
+                         &out) == 0;
+    if (!suite_ok_) std::cerr << out;
+  }
+  static void TearDownTestSuite() {
+    delete suite_dir_;
+    suite_dir_ = nullptr;
+  }
+  void SetUp() override {
+    if (!std::getenv("DISPLAY")) GTEST_SKIP() << "no X display: run through tools/test.sh (xvfb-run)";
+    ASSERT_TRUE(suite_ok_) << "run-case on the sample failed";
+    std::filesystem::copy_file(suite_dir_->path() / "store.db", store());
+  }
+  static std::filesystem::path Sample() { return std::filesystem::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion"; }
+  std::filesystem::path store() const { return dir_.path() / "store.db"; }
+  // Runs the GUI on the tracking page; returns the screenshot (also kept in
+  // the artefacts folder, its path printed).
+  cv::Mat RunPage(const std::string& case_dir, const std::string& options, const std::string& artefact,
+                  std::string* output) {
+    const auto png = dir_.path() / (artefact + ".png");
+    EXPECT_EQ(RunArpos("gui --store " + store().string() + " --case " + case_dir + " --page 3 " + options +
+                           " --screenshot " + png.string(),
+                       output),
+              0)
+        << *output;
+    const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+    if (!shot.empty()) {
+      std::filesystem::create_directories(ARPOS_GUI_ARTIFACTS_DIR);
+      const auto kept = std::filesystem::path(ARPOS_GUI_ARTIFACTS_DIR) / (artefact + ".png");
+      cv::imwrite(kept.string(), shot);
+      std::cout << "screenshot: " << kept.string() << "\n";
+    }
+    return shot;
+  }
+  // The newest tracking run in the store (run-case stored the first).
+  std::optional<TrackingRunRecord> NewestRun(std::vector<TrackingFrameRecord>* frames) {
+    auto database = SqliteDatabase::Open(store().string());
+    std::optional<TrackingRunRecord> newest;
+    for (long long id = 1; id < 100; ++id) {
+      auto run = database->GetTrackingRun(TrackingRunId(id));
+      if (!run) break;
+      newest = run;
+    }
+    if (newest && frames) *frames = database->GetTrackingFrames(newest->id);
+    return newest;
+  }
+  int TrackingRunCount() {
+    auto database = SqliteDatabase::Open(store().string());
+    int n = 0;
+    while (database->GetTrackingRun(TrackingRunId(n + 1))) ++n;
+    return n;
+  }
+  TempDir dir_;
+  static TempDir* suite_dir_;
+  static bool suite_ok_;
+};
+TempDir* TrackingPageTest::suite_dir_ = nullptr;
+bool TrackingPageTest::suite_ok_ = false;
+
+// Pixels of `shot` within `roi` for which `pick` (BGR) holds.
+template <typename Pick>
+int CountPixels(const cv::Mat& shot, const cv::Rect& roi, Pick pick) {
+  int n = 0;
+  const cv::Rect r = roi & cv::Rect(0, 0, shot.cols, shot.rows);
+  for (int y = r.y; y < r.y + r.height; ++y) {
+    for (int x = r.x; x < r.x + r.width; ++x) n += pick(shot.at<cv::Vec3b>(y, x));
+  }
+  return n;
+}
+
+// Played to the end: the run with every frame is stored, and the page shows
+// the overlay (red current pose, blue planned pose) and the correction panel.
+TEST_F(TrackingPageTest, PlaysTheSequenceToTheEndAndStoresTheRun) {
+  const int runs_before = TrackingRunCount();
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(), "--play --fast --sequence tracking/seq_00 --screenshot-when-done",
+                               "tracking_page_end", &out);
+  ASSERT_FALSE(shot.empty());
+  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
+  EXPECT_EQ(TrackingRunCount(), runs_before + 1);
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(run->sequence_name, "seq_00");
+  EXPECT_EQ(frames.size(), 3u);  // the sample's tracking/seq_00
+  EXPECT_EQ(run->summary.find("stopped"), std::string::npos) << run->summary;
+
+  // The camera image with the overlay fills the left of the page, the
+  // correction panel the right.
+  const cv::Rect image_area(0, 0, shot.cols * 3 / 5, shot.rows * 3 / 4);
+  const int red = CountPixels(shot, image_area, [](const cv::Vec3b& p) {
+    return p[2] > 120 && p[2] > p[1] + 60 && p[2] > p[0] + 60;
+  });
+  const int blue = CountPixels(shot, image_area, [](const cv::Vec3b& p) {
+    return p[0] > 120 && p[0] > p[2] + 60 && p[0] > p[1] + 20;
+  });
+  EXPECT_GT(red, 500) << "no model at the current pose (red)";
+  EXPECT_GT(blue, 500) << "no model at the planned pose (blue)";
+  // The panel: its dark background and a banner in a state colour (green,
+  // amber or red), on the right.
+  const cv::Rect panel_area(shot.cols * 3 / 5, 0, shot.cols * 2 / 5, shot.rows * 3 / 4);
+  const int panel_background = CountPixels(shot, panel_area, [](const cv::Vec3b& p) {
+    return std::abs(p[0] - 0x28) < 4 && std::abs(p[1] - 0x21) < 4 && std::abs(p[2] - 0x1e) < 4;
+  });
+  EXPECT_GT(panel_background, 20000) << "no correction panel";
+  const int banner = CountPixels(shot, panel_area, [](const cv::Vec3b& p) {
+    const bool green = std::abs(p[2] - 46) < 6 && std::abs(p[1] - 125) < 6 && std::abs(p[0] - 50) < 6;
+    const bool amber = std::abs(p[2] - 240) < 6 && std::abs(p[1] - 160) < 6 && p[0] < 8;
+    const bool lost = std::abs(p[2] - 198) < 6 && std::abs(p[1] - 40) < 6 && std::abs(p[0] - 40) < 6;
+    return green || amber || lost;
+  });
+  EXPECT_GT(banner, 5000) << "no state banner";
+}
+
+// Pause stops the frames: paused after the first, nothing more is tracked
+// for seconds (unpaused, the three frames take well under that); quitting
+// stores the one frame as a stopped run.
+TEST_F(TrackingPageTest, PauseStopsFrameAdvance) {
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(), "--play --fast --pause-after 1 --screenshot-delay 9000",
+                               "tracking_page_paused", &out);
+  ASSERT_FALSE(shot.empty());
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(frames.size(), 1u);
+  EXPECT_NE(run->summary.find("stopped after 1 of 3 frames"), std::string::npos) << run->summary;
+}
+
+// A frame without its depth image is a frame with a stated state and note,
+// and the run goes on to the end.
+TEST_F(TrackingPageTest, MissingDepthFrameIsStatedNotFatal) {
+  const auto case_dir = dir_.path() / "demo_xtion";
+  std::filesystem::copy(Sample(), case_dir, std::filesystem::copy_options::recursive);
+  // The second frame's depth image goes missing.
+  std::vector<std::filesystem::path> depth;
+  for (const auto& e : std::filesystem::directory_iterator(case_dir / "tracking" / "seq_00" / "depth")) {
+    depth.push_back(e.path());
+  }
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 3u);
+  std::filesystem::remove(depth[1]);
+  std::string out;
+  const cv::Mat shot = RunPage(case_dir.string(), "--play --fast --screenshot-when-done", "tracking_page_no_depth", &out);
+  ASSERT_FALSE(shot.empty());
+  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  ASSERT_EQ(frames.size(), 3u);
+  EXPECT_NE(frames[1].note.find("depth"), std::string::npos) << frames[1].note;
+  EXPECT_FALSE(frames[1].source.empty());
 }
 
 }  // namespace
