@@ -142,7 +142,8 @@ void CorrectionPanel::ShowCorrection(const CouchCorrection& c, const QString& re
 
 void CorrectionPanel::ShowRate(double frames_per_s, double latency_ms) {
   rate_->setText(tr("%1 frames/s   latency %2 ms")
-                     .arg(frames_per_s, 0, 'f', frames_per_s < 10 ? 1 : 0)
+                     .arg(frames_per_s > 0 ? QString::number(frames_per_s, 'f', frames_per_s < 10 ? 1 : 0)
+                                           : QString("\u2014"))
                      .arg(latency_ms, 0, 'f', 0));
 }
 

@@ -12,11 +12,11 @@ namespace {
 const QColor kAxisColors[3] = {QColor(79, 195, 247), QColor(206, 147, 216), QColor(255, 238, 88)};
 const char* kAxisNames[6] = {"lateral", "longitudinal", "vertical", "pitch", "roll", "yaw"};
 
-// The smallest of 1, 2, 5 x 10^k at or above `value`.
+// The smallest of 1, 1.5, 2, 3, 5, 7.5 x 10^k at or above `value`.
 double NiceCeil(double value) {
   if (!(value > 0)) return 1;
   const double p = std::pow(10.0, std::floor(std::log10(value)));
-  for (double m : {1.0, 2.0, 5.0, 10.0}) {
+  for (double m : {1.0, 1.5, 2.0, 3.0, 5.0, 7.5, 10.0}) {
     if (m * p >= value - 1e-12) return m * p;
   }
   return 10 * p;
@@ -59,7 +59,8 @@ void CorrectionPlot::paintEvent(QPaintEvent*) {
   QPainter painter(this);
   painter.setRenderHint(QPainter::Antialiasing);
   painter.fillRect(rect(), QColor(30, 33, 40));
-  const double t_end = samples_.empty() ? window_s_ : samples_.back().t;
+  // A little room right of the newest frame so its points are not cut.
+  const double t_end = (samples_.empty() ? 0 : samples_.back().t) + 0.02 * window_s_;
   const double gap = 8;
   const double half = (height() - gap - 18) / 2.0;  // 18 px of time labels at the bottom
   PaintPanel(&painter, QRectF(0, 0, width(), half), 0, tolerances_.translation_mm, "mm", t_end);
@@ -71,8 +72,8 @@ void CorrectionPlot::paintEvent(QPaintEvent*) {
   font.setPixelSize(11);
   painter.setFont(font);
   const int step = window_s_ > 12 ? 5 : 2;
-  for (int s = 0; s <= static_cast<int>(window_s_); s += step) {
-    const double x = right - (right - left) * s / window_s_;
+  for (int s = 0; s <= static_cast<int>(0.98 * window_s_); s += step) {
+    const double x = right - (right - left) * (s + 0.02 * window_s_) / window_s_;
     painter.drawText(QRectF(x - 30, height() - 16, 60, 14), Qt::AlignCenter,
                      s == 0 ? tr("now") : tr("\u2212%1 s").arg(s));
   }
@@ -159,7 +160,8 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   };
   label(extent, QColor(170, 176, 188));
   label(-extent, QColor(170, 176, 188));
-  if (tolerance < 0.8 * extent) {
+  // The tolerance labels where they do not run into each other or the scale's.
+  if (tolerance < 0.8 * extent && Y(-tolerance) - Y(tolerance) > 14) {
     label(tolerance, QColor(102, 187, 106));
     label(-tolerance, QColor(102, 187, 106));
   }

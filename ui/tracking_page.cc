@@ -97,6 +97,9 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   play_button_->setToolTip(tr("Track the recording as if live; again to pause"));
   step_button_->setToolTip(tr("Track one frame (pauses first)"));
   stop_button_->setToolTip(tr("End the run here and store the frames tracked so far"));
+  run_state_ = new QLabel(this);
+  run_state_->setMinimumWidth(80);
+  run_state_->setAlignment(Qt::AlignCenter);
   frame_view_ = new FrameView(this);
   frame_view_->setMinimumSize(480, 360);
   panel_ = new CorrectionPanel(this);
@@ -105,6 +108,9 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   plot_->SetTolerances(tolerances_);
   plot_->setFixedHeight(200);
   frame_label_ = new QLabel(this);
+  // A long note (a file path) is cut at the page's edge, not widening the
+  // window; the whole line is its tooltip.
+  frame_label_->setSizePolicy(QSizePolicy::Ignored, QSizePolicy::Preferred);
   status_ = new QLabel(this);
   status_->setWordWrap(true);
   status_->setTextInteractionFlags(Qt::TextSelectableByMouse);
@@ -118,6 +124,7 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   controls->addWidget(play_button_);
   controls->addWidget(step_button_);
   controls->addWidget(stop_button_);
+  controls->addWidget(run_state_);
   auto* views = new QHBoxLayout;
   views->addWidget(frame_view_, 3);
   views->addWidget(panel_, 2);
@@ -245,12 +252,10 @@ void TrackingPage::ListSessions() {
   sessions_->blockSignals(true);
   for (const SessionRecord& s : state_->database->ListSessions(std::nullopt, 100)) {
     if (!CanTrack(state_->database.get(), s.id)) continue;
-    sessions_->addItem(tr("Session %1 (plan %2, fraction %3, %4)")
-                           .arg(s.id.value())
-                           .arg(s.plan_id.value())
-                           .arg(s.fraction)
-                           .arg(Q(FormatUtcTime(s.started_unix_ms))),
+    sessions_->addItem(tr("Session %1: plan %2, fraction %3").arg(s.id.value()).arg(s.plan_id.value()).arg(s.fraction),
                        QVariant::fromValue<qlonglong>(s.id.value()));
+    sessions_->setItemData(sessions_->count() - 1, tr("started %1").arg(Q(FormatUtcTime(s.started_unix_ms))),
+                           Qt::ToolTipRole);
     if (preferred && *preferred == s.id.value()) sessions_->setCurrentIndex(sessions_->count() - 1);
   }
   sessions_->blockSignals(false);
@@ -302,6 +307,10 @@ void TrackingPage::UpdateButtons() {
   play_button_->setEnabled(running || can_start);
   step_button_->setEnabled(paused || (!running && can_start));
   stop_button_->setEnabled(running);
+  run_state_->setText(paused ? tr("PAUSED") : running ? tr("RUNNING") : QString());
+  run_state_->setStyleSheet(paused    ? "background: #f0a000; color: #111; font-weight: bold; padding: 3px;"
+                            : running ? "background: #2e7d32; color: white; font-weight: bold; padding: 3px;"
+                                      : "");
   sessions_->setEnabled(!running);
   recordings_->setEnabled(!running);
   pace_->setEnabled(!running);
@@ -372,6 +381,7 @@ void TrackingPage::OnFrame(const LiveFrame& frame) {
   else if (!frame.has_depth) text += tr(" (no depth image)");
   if (!frame.note.isEmpty()) text += tr(". %1").arg(frame.note.left(240));
   frame_label_->setText(text);
+  frame_label_->setToolTip(text);
   frame_label_->setStyleSheet(frame.readable && frame.has_depth ? "" : "color: #c02828; font-weight: bold;");
   emit FrameShown(frame.index);
 }

@@ -79,6 +79,7 @@ class TrackingPage : public QWizardPage {
   QPushButton* play_button_;
   QPushButton* step_button_;
   QPushButton* stop_button_;
+  QLabel* run_state_;  ///< RUNNING / PAUSED next to the buttons
   FrameView* frame_view_;
   CorrectionPanel* panel_;
   CorrectionPlot* plot_;
