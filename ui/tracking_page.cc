@@ -150,6 +150,7 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   connect(live_, &LiveTracking::FrameTracked, this, [this](LiveFrame frame) { OnFrame(frame); });
   connect(live_, &LiveTracking::FrameImage, this, [this](cv::Mat image, int) {
     frame_view_->ShowColor(image);
+    ++images_shown_;
     live_->ImageShown();
   });
   connect(live_, &LiveTracking::PausedChanged, this, [this](bool) { UpdateButtons(); });
@@ -358,6 +359,7 @@ void TrackingPage::StartRun(bool paused) {
   request.pause_after_frames = launch_.pause_after_frames;
   launch_.pause_after_frames = -1;  // once
   plot_->Clear();
+  images_shown_ = 0;
   panel_->Clear(tr("Starting…"));
   frame_label_->clear();
   status_->setStyleSheet("");
@@ -388,7 +390,11 @@ void TrackingPage::OnFrame(const LiveFrame& frame) {
 
 void TrackingPage::OnFinished(bool ok, const QString& message, qint64 run_id, int frames) {
   if (ok) {
-    status_->setText(tr("Tracking run %1 stored (%2 frames): %3").arg(run_id).arg(frames).arg(message));
+    status_->setText(tr("Tracking run %1 stored (%2 frames, overlay shown for %3): %4")
+                         .arg(run_id)
+                         .arg(frames)
+                         .arg(images_shown_)
+                         .arg(message));
     status_->setStyleSheet("color: #2a7a2a;");
   } else {
     status_->setText(tr("Tracking failed: %1").arg(message));

@@ -85,6 +85,7 @@ class TrackingPage : public QWizardPage {
   CorrectionPlot* plot_;
   QLabel* frame_label_;
   QLabel* status_;
+  int images_shown_ = 0;  ///< overlay images shown in this run
   bool filters_installed_ = false;
   bool launched_ = false;
   /// Stored tracking recordings of the chosen session, by absolute path.
