@@ -1,6 +1,8 @@
 #include "exe/cmd_gui.h"
 
+#include <QAbstractButton>
 #include <QApplication>
+#include <QMessageBox>
 #include <QSurfaceFormat>
 #include <QTimer>
 #include <QVTKOpenGLNativeWidget.h>
@@ -29,8 +31,14 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
       "                      stores the frames tracked so far)\n"
       "  --sequence NAME     the recording to choose, as listed (e.g. tracking/seq_00)\n"
       "  --fast              as fast as tracking goes (default: the recording's pace)\n"
-      "  --pause-after N     pause by itself once N frames are tracked\n";
-  const Args args(argv, {"store", "case", "page", "screenshot", "screenshot-delay", "sequence", "pause-after"},
+      "  --pause-after N     pause by itself once N frames are tracked\n"
+      "For tests:\n"
+      "  --close-after MS    close the window after MS ms, as its close button does\n"
+      "  --answer-close A    answer a question the window asks on closing: yes or no\n"
+      "                      (its text is printed)\n";
+  const Args args(argv,
+                  {"store", "case", "page", "screenshot", "screenshot-delay", "sequence", "pause-after",
+                   "close-after", "answer-close"},
                   {"help", "play", "fast", "screenshot-when-done"});
   if (args.Has("help")) {
     std::cout << usage;
@@ -48,6 +56,12 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
   if (delay_ms < 0) ARPOS_INPUT_ERROR("--screenshot-delay must be >= 0");
   const long long pause_after = args.GetInt("pause-after", -1);
   if (args.Has("pause-after") && pause_after < 0) ARPOS_INPUT_ERROR("--pause-after must be >= 0");
+  const long long close_after = args.GetInt("close-after", -1);
+  if (args.Has("close-after") && close_after < 0) ARPOS_INPUT_ERROR("--close-after must be >= 0");
+  const std::string answer_close = args.GetOr("answer-close", "");
+  if (!answer_close.empty() && answer_close != "yes" && answer_close != "no") {
+    ARPOS_INPUT_ERROR("--answer-close must be yes or no");
+  }
 
   // VTK's Qt widget needs its surface format before the application exists.
   QSurfaceFormat::setDefaultFormat(QVTKOpenGLNativeWidget::defaultFormat());
@@ -87,6 +101,26 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
     } else {
       QTimer::singleShot(static_cast<int>(delay_ms), &wizard, take);
     }
+  }
+  if (close_after >= 0) {
+    QTimer::singleShot(static_cast<int>(close_after), &wizard, [&wizard, answer_close] {
+      if (!answer_close.empty()) {
+        // The question is modal: answer it from inside its own event loop.
+        QTimer::singleShot(500, &wizard, [answer_close] {
+          auto* box = qobject_cast<QMessageBox*>(QApplication::activeModalWidget());
+          if (!box) {
+            std::cout << "arpos gui: no question on closing" << std::endl;
+            return;
+          }
+          std::cout << "arpos gui: asked \"" << box->text().toStdString() << "\", answering " << answer_close
+                    << std::endl;
+          if (QAbstractButton* button = box->button(answer_close == "yes" ? QMessageBox::Yes : QMessageBox::No)) {
+            button->click();
+          }
+        });
+      }
+      wizard.close();
+    });
   }
   // Quitting while a run goes on stops it; the wizard's pages store what was tracked.
   return app.exec();

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -188,26 +189,37 @@ TEST_F(GuiTest, PlanningPageShowsTheRoomMapMarkers) {
 }
 
 // ---------------------------------------------------------------- tracking page
-// The live positioning screen on the sample: a store filled once by
-// run-case (plan, session, alignment), copied for each test.
+// The live positioning screen on the sample: a store filled by run-case
+// (plan, session, alignment), copied for each test. ctest runs each test in
+// its own process, so the store is kept in the artefacts folder and made
+// again only when the executable is newer (written aside, then renamed).
 class TrackingPageTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     if (!std::getenv("DISPLAY")) return;
-    suite_dir_ = new TempDir("arpos_gui_tracking");
+    namespace fs = std::filesystem;
+    fs::create_directories(ARPOS_GUI_ARTIFACTS_DIR);
+    sample_store_ = fs::path(ARPOS_GUI_ARTIFACTS_DIR) / "sample_store.db";
+    std::error_code ec;
+    if (fs::exists(sample_store_) && fs::last_write_time(sample_store_, ec) > fs::last_write_time(ARPOS_EXECUTABLE, ec)) {
+      suite_ok_ = true;
+      return;
+    }
+    TempDir dir("arpos_gui_tracking");
     std::string out;
-    suite_ok_ = RunArpos("run-case " + Sample().string() + " --store " + (suite_dir_->path() / "store.db").string(),
-                         &out) == 0;
-    if (!suite_ok_) std::cerr << out;
-  }
-  static void TearDownTestSuite() {
-    delete suite_dir_;
-    suite_dir_ = nullptr;
+    suite_ok_ = RunArpos("run-case " + Sample().string() + " --store " + (dir.path() / "store.db").string(), &out) == 0;
+    if (!suite_ok_) {
+      std::cerr << out;
+      return;
+    }
+    const fs::path aside = sample_store_.string() + "." + std::to_string(::getpid());
+    fs::copy_file(dir.path() / "store.db", aside, fs::copy_options::overwrite_existing);
+    fs::rename(aside, sample_store_);
   }
   void SetUp() override {
     if (!std::getenv("DISPLAY")) GTEST_SKIP() << "no X display: run through tools/test.sh (xvfb-run)";
     ASSERT_TRUE(suite_ok_) << "run-case on the sample failed";
-    std::filesystem::copy_file(suite_dir_->path() / "store.db", store());
+    std::filesystem::copy_file(sample_store_, store());
   }
   static std::filesystem::path Sample() { return std::filesystem::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion"; }
   std::filesystem::path store() const { return dir_.path() / "store.db"; }
@@ -249,10 +261,10 @@ class TrackingPageTest : public ::testing::Test {
     return n;
   }
   TempDir dir_;
-  static TempDir* suite_dir_;
+  static std::filesystem::path sample_store_;
   static bool suite_ok_;
 };
-TempDir* TrackingPageTest::suite_dir_ = nullptr;
+std::filesystem::path TrackingPageTest::sample_store_;
 bool TrackingPageTest::suite_ok_ = false;
 
 // Pixels of `shot` within `roi` for which `pick` (BGR) holds.
@@ -373,6 +385,31 @@ TEST_F(TrackingPageTest, MissingDepthFrameIsStatedNotFatal) {
   ASSERT_TRUE(run.has_value());
   ASSERT_EQ(frames.size(), 3u);
   EXPECT_NE(frames[1].note.find("depth"), std::string::npos) << frames[1].note;
+}
+
+// Closing the window while a run goes on asks first. No: the window stays
+// (the screenshot is taken later). Yes: it closes at once and the frames
+// tracked so far are stored as a stopped run.
+TEST_F(TrackingPageTest, ClosingWhileTrackingAsksFirst) {
+  const int runs_before = TrackingRunCount();
+  std::string out;
+  const auto common = "gui --store " + store().string() + " --case " + Sample().string() +
+                      " --page 3 --play --fast --pause-after 1 --close-after 4000 --screenshot-delay 8000";
+  const auto kept_png = dir_.path() / "kept.png";
+  ASSERT_EQ(RunArpos(common + " --answer-close no --screenshot " + kept_png.string(), &out), 0) << out;
+  EXPECT_NE(out.find("asked \"Stop tracking?"), std::string::npos) << out;
+  EXPECT_TRUE(std::filesystem::exists(kept_png)) << "the window closed although the answer was no";
+
+  out.clear();
+  const auto closed_png = dir_.path() / "closed.png";
+  ASSERT_EQ(RunArpos(common + " --answer-close yes --screenshot " + closed_png.string(), &out), 0) << out;
+  EXPECT_NE(out.find("asked \"Stop tracking?"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(closed_png)) << "the window stayed open although the answer was yes";
+  EXPECT_NE(out.find("tracking run stored: stopped after 1 of 3 frames"), std::string::npos) << out;
+  EXPECT_EQ(TrackingRunCount(), runs_before + 2);
+  std::vector<TrackingFrameRecord> frames;
+  ASSERT_TRUE(NewestRun(&frames).has_value());
+  EXPECT_EQ(frames.size(), 1u);
 }
 
 }  // namespace
