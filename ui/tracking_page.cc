@@ -214,7 +214,9 @@ bool TrackingPage::eventFilter(QObject* watched, QEvent* event) {
   const bool is_button = w && (watched == w->button(QWizard::BackButton) || watched == w->button(QWizard::CancelButton));
   bool leaving = false;
   if (is_button) {
-    if (event->type() == QEvent::MouseButtonRelease) {
+    if (event->type() == QEvent::Shortcut) {  // Alt+B
+      leaving = true;
+    } else if (event->type() == QEvent::MouseButtonRelease) {
       auto* button = static_cast<QAbstractButton*>(watched);
       leaving = button->rect().contains(static_cast<QMouseEvent*>(event)->pos());
     } else if (event->type() == QEvent::KeyPress) {
@@ -270,11 +272,10 @@ void TrackingPage::ListSessions() {
 void TrackingPage::ListRecordings() {
   recordings_->clear();
   stored_recordings_.clear();
+  std::vector<RecordingRecord> stored;
   if (state_->database && sessions_->currentIndex() >= 0) {
-    const SessionId session(sessions_->currentData().toLongLong());
-    for (const RecordingRecord& r : TrackingRecordings(state_->database.get(), session)) {
-      stored_recordings_[AbsolutePath(r.path)] = r.id.value();
-    }
+    stored = TrackingRecordings(state_->database.get(), SessionId(sessions_->currentData().toLongLong()));
+    for (const RecordingRecord& r : stored) stored_recordings_[AbsolutePath(r.path)] = r.id.value();
   }
   std::set<std::string> listed;
   if (!state_->options.case_dir.empty()) {
@@ -289,13 +290,9 @@ void TrackingPage::ListRecordings() {
     }
   }
   // The session's own recordings that are not the case's.
-  if (state_->database && sessions_->currentIndex() >= 0) {
-    const SessionId session(sessions_->currentData().toLongLong());
-    for (const RecordingRecord& r : TrackingRecordings(state_->database.get(), session)) {
-      if (listed.count(AbsolutePath(r.path))) continue;
-      listed.insert(AbsolutePath(r.path));
-      recordings_->addItem(tr("recording %1: %2").arg(r.id.value()).arg(Q(r.name)), Q(r.path));
-    }
+  for (const RecordingRecord& r : stored) {
+    if (!listed.insert(AbsolutePath(r.path)).second) continue;
+    recordings_->addItem(tr("recording %1: %2").arg(r.id.value()).arg(Q(r.name)), Q(r.path));
   }
   UpdateButtons();
 }
