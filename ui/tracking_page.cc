@@ -15,7 +15,9 @@
 #include <sqlite3.h>
 
 #include "room_map/plan_stage.h"
+#include "sensor/case_config.h"
 #include "sensor/case_folder.h"
+#include "sensor/sequence.h"
 #include "store/database.h"
 #include "store/describe.h"
 #include "store/sqlite_database.h"
@@ -137,6 +139,7 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   layout->addWidget(status_);
 
   connect(sessions_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] { ListRecordings(); });
+  connect(recordings_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] { ShowFirstFrame(); });
   connect(play_button_, &QPushButton::clicked, this, &TrackingPage::Play);
   connect(step_button_, &QPushButton::clicked, this, &TrackingPage::StepOnce);
   connect(stop_button_, &QPushButton::clicked, this, [this] {
@@ -295,6 +298,24 @@ void TrackingPage::ListRecordings() {
     recordings_->addItem(tr("recording %1: %2").arg(r.id.value()).arg(Q(r.name)), Q(r.path));
   }
   UpdateButtons();
+}
+
+void TrackingPage::ShowFirstFrame() {
+  if (live_->running() || recordings_->currentIndex() < 0 || state_->options.case_dir.empty()) return;
+  try {
+    const CaseConfig config = LoadCaseConfig(std::filesystem::path(state_->options.case_dir) / "case.yaml");
+    const Sequence sequence = Sequence::OpenEveryColourFrame(recordings_->currentData().toString().toStdString());
+    if (sequence.size() == 0) return;
+    std::string depth_problem;
+    frame_view_->ShowColor(sequence.LoadFrameColourFirst(0, config.camera, &depth_problem).color);
+    frame_label_->setStyleSheet("");
+    frame_label_->setText(tr("%1: %2 frames, %3 s. Play tracks it as if live.")
+                              .arg(recordings_->currentText())
+                              .arg(sequence.size())
+                              .arg(sequence.timestamp_s(sequence.size() - 1) - sequence.timestamp_s(0), 0, 'f', 1));
+  } catch (const std::exception& e) {
+    frame_label_->setText(Q(e.what()));
+  }
 }
 
 void TrackingPage::UpdateButtons() {

@@ -59,6 +59,8 @@ class TrackingPage : public QWizardPage {
  private:
   void ListSessions();
   void ListRecordings();
+  /// The chosen recording's first colour frame, while nothing is tracked.
+  void ShowFirstFrame();
   void Play();
   void StepOnce();
   void StartRun(bool paused);
