@@ -46,6 +46,10 @@ class TrackingPage : public QWizardPage {
   void cleanupPage() override;
   bool validatePage() override;
   bool running() const;
+  /// What the Play / Pause button does: start, pause or go on.
+  void Play();
+  /// What the Step button does: one frame (starting the run paused if needed).
+  void StepOnce();
 
  signals:
   /// The run ended: stored (ok, its summary) or failed (the error).
@@ -61,8 +65,6 @@ class TrackingPage : public QWizardPage {
   void ListRecordings();
   /// The chosen recording's first colour frame, while nothing is tracked.
   void ShowFirstFrame();
-  void Play();
-  void StepOnce();
   void StartRun(bool paused);
   void UpdateButtons();
   /// Asks whether to stop the running run; true (and stopped, stored) if yes

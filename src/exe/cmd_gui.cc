@@ -32,13 +32,14 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
       "  --sequence NAME     the recording to choose, as listed (e.g. tracking/seq_00)\n"
       "  --fast              as fast as tracking goes (default: the recording's pace)\n"
       "  --pause-after N     pause by itself once N frames are tracked\n"
+      "  --steps N           press Step N times, 1.5 s apart, from 2 s after opening\n"
       "For tests:\n"
       "  --close-after MS    close the window after MS ms, as its close button does\n"
       "  --answer-close A    answer a question the window asks on closing: yes or no\n"
       "                      (its text is printed)\n";
   const Args args(argv,
                   {"store", "case", "page", "screenshot", "screenshot-delay", "sequence", "pause-after",
-                   "close-after", "answer-close"},
+                   "close-after", "answer-close", "steps"},
                   {"help", "play", "fast", "screenshot-when-done"});
   if (args.Has("help")) {
     std::cout << usage;
@@ -46,10 +47,12 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
   }
   const long long page = args.GetInt("page", 0);
   if (page < 0 || page > 4) ARPOS_INPUT_ERROR("--page must be 0..4");
-  const bool tracking_options = args.Has("play") || args.Has("sequence") || args.Has("fast") ||
+  const long long steps = args.GetInt("steps", 0);
+  if (steps < 0) ARPOS_INPUT_ERROR("--steps must be >= 0");
+  const bool tracking_options = args.Has("play") || args.Has("sequence") || args.Has("fast") || args.Has("steps") ||
                                 args.Has("pause-after") || args.Has("screenshot-when-done");
   if (tracking_options && page != ui::ArposWizard::kTrackingPage) {
-    ARPOS_INPUT_ERROR("--play, --sequence, --fast, --pause-after and --screenshot-when-done need --page 3");
+    ARPOS_INPUT_ERROR("--play, --sequence, --fast, --steps, --pause-after and --screenshot-when-done need --page 3");
   }
   if (args.Has("screenshot-when-done") && !args.Has("play")) ARPOS_INPUT_ERROR("--screenshot-when-done needs --play");
   const long long delay_ms = args.GetInt("screenshot-delay", 1500);
@@ -101,6 +104,9 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
     } else {
       QTimer::singleShot(static_cast<int>(delay_ms), &wizard, take);
     }
+  }
+  for (long long i = 0; i < steps; ++i) {
+    QTimer::singleShot(static_cast<int>(2000 + 1500 * i), tracking, [tracking] { tracking->StepOnce(); });
   }
   if (close_after >= 0) {
     QTimer::singleShot(static_cast<int>(close_after), &wizard, [&wizard, answer_close] {

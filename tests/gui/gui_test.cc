@@ -341,6 +341,20 @@ TEST_F(TrackingPageTest, PauseStopsFrameAdvance) {
   EXPECT_NE(run->summary.find("stopped after 1 of 3 frames"), std::string::npos) << run->summary;
 }
 
+// Step tracks one frame at a time: two presses (the first starts the run
+// paused), then nothing more until the window closes and the two frames are
+// stored as a stopped run.
+TEST_F(TrackingPageTest, StepTracksOneFrameAtATime) {
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(), "--steps 2 --screenshot-delay 8000", "tracking_page_stepped", &out);
+  ASSERT_FALSE(shot.empty());
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(frames.size(), 2u) << run->summary;
+  EXPECT_NE(run->summary.find("stopped after 2 of 3 frames"), std::string::npos) << run->summary;
+}
+
 // A frame without its depth image is a frame with a stated state and note:
 // paused on it, the page says so (red line under the plot) and shows the
 // frame lost; played through, the run goes on to the end.
