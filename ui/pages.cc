@@ -16,7 +16,6 @@
 #include <QPlainTextEdit>
 #include <QProgressBar>
 #include <QPushButton>
-#include <QSlider>
 #include <QTableWidget>
 #include <QTextStream>
 #include <QVBoxLayout>
@@ -33,17 +32,16 @@
 #include "report/report_writer.h"
 #include "report/session_report.h"
 #include "sensor/case_check.h"
-#include "sensor/case_folder.h"
 #include "room_map/plan_stage.h"
-#include "sensor/sequence.h"
+#include "sensor/case_folder.h"
 #include "store/database.h"
 #include "store/describe.h"
 #include "store/lifecycle.h"
 #include "store/record_conversions.h"
 #include "store/sqlite_database.h"
-#include "ui/frame_view.h"
 #include "ui/model_view.h"
 #include "ui/worker.h"
+#include "util/logging.h"
 #include "util/string_util.h"
 
 namespace arpos::ui {
@@ -234,14 +232,22 @@ bool CasePage::validatePage() {
     const CaseCheckReport report = CheckCase(state_->options.case_dir, options);
     if (!report.ok()) {
       RunCheck();
-      QMessageBox::warning(this, tr("The case has errors"),
-                           tr("The case folder has errors (listed on this page): fix them, choose another case, or "
-                              "clear the case field to review the store only."));
-      return false;
+      int errors = 0;
+      for (const auto& p : report.problems) errors += p.severity == CaseProblem::Severity::kError;
+      if (state_->options.unattended) {
+        ARPOS_WARN("the case has " << errors << " error(s); going on (unattended)");
+      } else if (QMessageBox::question(
+                     this, tr("The case has errors"),
+                     tr("The case folder has %1 error(s), listed on this page. Planning and the session stage "
+                        "stop at them; tracking states each bad frame and goes on.\n\nGo on with this case?")
+                         .arg(errors),
+                     QMessageBox::Yes | QMessageBox::No, QMessageBox::No) != QMessageBox::Yes) {
+        return false;
+      }
     }
   }
   for (const std::string& note : RecoverInterruptedSessions(state_->database.get())) {
-    QMessageBox::information(this, tr("Interrupted session"), Q(note));
+    if (!state_->options.unattended) QMessageBox::information(this, tr("Interrupted session"), Q(note));
   }
   return true;
 }
@@ -818,68 +824,6 @@ void SessionPage::RunSessionStage() {
       });
   if (!started) running_here_ = false;
   UpdateButtons();
-}
-
-// ---------------------------------------------------------------- tracking
-
-TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
-  setTitle(tr("Tracking"));
-  setSubTitle(tr("Replay a recording of the case as if live."));
-  sequences_ = new QComboBox(this);
-  slider_ = new QSlider(Qt::Horizontal, this);
-  color_view_ = new FrameView(this);
-  depth_view_ = new FrameView(this);
-  frame_label_ = new QLabel(this);
-  connect(sequences_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] { LoadSequence(); });
-  connect(slider_, &QSlider::valueChanged, this, &TrackingPage::ShowFrame);
-  auto* views = new QHBoxLayout;
-  views->addWidget(color_view_, 1);
-  views->addWidget(depth_view_, 1);
-  auto* layout = new QVBoxLayout(this);
-  layout->addWidget(sequences_);
-  layout->addLayout(views, 1);
-  layout->addWidget(slider_);
-  layout->addWidget(frame_label_);
-}
-
-void TrackingPage::initializePage() {
-  sequences_->clear();
-  try {
-    const CaseFolder folder = LoadCaseFolder(state_->options.case_dir);
-    for (const auto& [name, dir] : folder.tracking) sequences_->addItem(Q("tracking/" + name), Q(dir.string()));
-    sequences_->addItem("body_scan", Q(folder.body_scan_dir.string()));
-    sequences_->addItem("room", Q(folder.room_dir.string()));
-  } catch (const std::exception& e) {
-    frame_label_->setText(Q(e.what()));
-  }
-}
-
-void TrackingPage::LoadSequence() {
-  const QString dir = sequences_->currentData().toString();
-  if (dir.isEmpty()) return;
-  try {
-    const Sequence seq = Sequence::Open(dir.toStdString());
-    slider_->setRange(0, static_cast<int>(seq.size()) - 1);
-    slider_->setValue(0);
-    ShowFrame(0);
-  } catch (const std::exception& e) {
-    frame_label_->setText(Q(e.what()));
-  }
-}
-
-void TrackingPage::ShowFrame(int index) {
-  const QString dir = sequences_->currentData().toString();
-  if (dir.isEmpty()) return;
-  try {
-    const CaseConfig config = LoadCaseConfig(std::filesystem::path(state_->options.case_dir) / "case.yaml");
-    const Sequence seq = Sequence::Open(dir.toStdString());
-    const RgbdFrame frame = seq.LoadFrame(static_cast<size_t>(index), config.camera);
-    color_view_->ShowColor(frame.color);
-    depth_view_->ShowDepth(frame.depth, frame.depth_scale);
-    frame_label_->setText(tr("frame %1 of %2, t = %3 s").arg(index + 1).arg(seq.size()).arg(frame.timestamp_s, 0, 'f', 3));
-  } catch (const std::exception& e) {
-    frame_label_->setText(Q(e.what()));
-  }
 }
 
 // ---------------------------------------------------------------- audit

@@ -15,14 +15,12 @@ class QListWidget;
 class QPlainTextEdit;
 class QProgressBar;
 class QPushButton;
-class QSlider;
 class QTableWidget;
 class QComboBox;
 class QCheckBox;
 
 namespace arpos::ui {
 
-class FrameView;
 class ModelView;
 
 class CasePage : public QWizardPage {
@@ -110,23 +108,6 @@ class SessionPage : public QWizardPage {
   std::vector<Eigen::Vector3d> model_picks_room_, reconstruction_picks_room_;  ///< where they are drawn
   QString pick_note_;  ///< what the last click that did not count hit
   void ClearPicks();
-};
-
-class TrackingPage : public QWizardPage {
-  Q_OBJECT
- public:
-  TrackingPage(WizardState* state, QWidget* parent = nullptr);
-  void initializePage() override;
-
- private:
-  void LoadSequence();
-  void ShowFrame(int index);
-  WizardState* state_;
-  QComboBox* sequences_;
-  QSlider* slider_;
-  FrameView* color_view_;
-  FrameView* depth_view_;
-  QLabel* frame_label_;
 };
 
 class AuditPage : public QWizardPage {

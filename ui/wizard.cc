@@ -4,6 +4,7 @@
 
 #include "store/sqlite_database.h"
 #include "ui/pages.h"
+#include "ui/tracking_page.h"
 #include "ui/worker.h"
 
 namespace arpos::ui {

@@ -22,6 +22,9 @@ struct WizardSettings {
   std::string case_dir;    ///< preselected case folder (may be empty)
   std::string user;        ///< --user / ARPOS_USER (empty: the login name)
   std::string role;        ///< --role / ARPOS_ROLE (empty: chosen on the first page)
+  /// Driven by a script (arpos gui --page/--screenshot): no questions that
+  /// wait for a person; what they would say goes to the log.
+  bool unattended = false;
 };
 
 /// State shared by the pages: the open store and the chosen case.

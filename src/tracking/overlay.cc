@@ -463,7 +463,8 @@ cv::Mat OverlayRenderer::Render(const cv::Mat& colour_bgr,
   const int margin = pad;
   const int stripe = std::max(3, static_cast<int>(std::lround(glyph.height * 0.4)));
 
-  const std::vector<std::string> lines = PanelLines(correction);
+  const std::vector<std::string> lines =
+      options_.correction_panel ? PanelLines(correction) : std::vector<std::string>{};
   // Widest of the lines and of a wide template, so the panel does not jitter.
   int text_width =
       cv::getTextSize("LAT +88.8 mm  LNG +88.8 mm  VRT +88.8 mm", font, scale, thickness, &baseline)
@@ -475,10 +476,12 @@ cv::Mat OverlayRenderer::Render(const cv::Mat& colour_bgr,
   const cv::Rect panel(margin, margin, stripe + 2 * pad + text_width,
                        pad + static_cast<int>(lines.size()) * line_step + pad / 2);
   const cv::Scalar state_colour = OverlayStateColor(correction.state);
-  DarkPanel(&out, panel);
-  cv::rectangle(
-      out, cv::Rect(panel.x, panel.y, stripe, panel.height) & cv::Rect(0, 0, out.cols, out.rows),
-      state_colour, cv::FILLED);
+  if (options_.correction_panel) {
+    DarkPanel(&out, panel);
+    cv::rectangle(
+        out, cv::Rect(panel.x, panel.y, stripe, panel.height) & cv::Rect(0, 0, out.cols, out.rows),
+        state_colour, cv::FILLED);
+  }
   for (size_t i = 0; i < lines.size(); ++i) {
     const cv::Point origin(panel.x + stripe + pad,
                            panel.y + pad + glyph.height + static_cast<int>(i) * line_step);

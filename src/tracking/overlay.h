@@ -66,6 +66,10 @@ struct OverlayOptions {
   /// gain over culling). The silhouette moves by up to about half a cell.
   double display_cell_m = 0;
   int max_display_faces = 60000;  ///< simplify only above this many faces
+  /// Draw the correction panel in the top-left corner; false when the numbers
+  /// are shown elsewhere (the GUI's correction panel). The caption is drawn
+  /// either way when given.
+  bool correction_panel = true;
 
   /// Empty if valid, else "field: problem".
   std::string Validate() const;

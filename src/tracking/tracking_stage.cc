@@ -146,6 +146,7 @@ TrackerOptions MakeTrackerOptions(const CaseConfig& config, const TrackingInputs
 
 std::string TrackSequenceResult::Summary() const {
   std::ostringstream out;
+  if (stopped) out << StringPrintf("stopped after %d of %d frames; ", frames, sequence_frames);
   out << StringPrintf("tracking %s: %d frames, %d tracked, %d carried, %d lost (%.1f %%); %d in tolerance, %d out",
                       name.c_str(), frames, tracked, carried, lost, frames ? 100.0 * lost / frames : 0.0,
                       in_tolerance, out_of_tolerance);
@@ -153,6 +154,18 @@ std::string TrackSequenceResult::Summary() const {
   out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
   if (frames) out << "\n  last correction: " << DescribeCorrection(last_correction);
   return out.str();
+}
+
+OverlayPoses OverlayPosesOf(const TrackedFrame& tracked, const Rigid3d& room_from_model_target) {
+  OverlayPoses poses;
+  if (tracked.room_from_camera) {
+    const Rigid3d camera_from_room = tracked.room_from_camera->Inverse();
+    poses.camera_from_model_planned = camera_from_room * room_from_model_target;
+    if (tracked.room_from_model) poses.camera_from_model_current = camera_from_room * *tracked.room_from_model;
+  } else if (tracked.camera_from_model) {
+    poses.camera_from_model_current = tracked.camera_from_model;
+  }
+  return poses;
 }
 
 TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,
@@ -205,7 +218,12 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   std::vector<TrackingFrameRecord> records;
   std::vector<double> totals;
   double last_t = -1;
+  result.sequence_frames = static_cast<int>(sequence.size());
   for (size_t i = 0; i < sequence.size(); ++i) {
+    if (options.before_frame && !options.before_frame(i, sequence.size())) {
+      result.stopped = true;
+      break;
+    }
     const double t = sequence.timestamp_s(i);
     const auto t_load = Clock::now();
     std::string note;
@@ -286,21 +304,27 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     records.push_back(std::move(record));
     result.last_correction = tracked.correction;
 
+    const OverlayPoses overlay_poses = OverlayPosesOf(tracked, inputs.room_from_model_target);
     if (overlay && readable) {
-      std::optional<Rigid3d> current, planned;
-      if (tracked.room_from_camera) {
-        const Rigid3d camera_from_room = tracked.room_from_camera->Inverse();
-        planned = camera_from_room * inputs.room_from_model_target;
-        if (tracked.room_from_model) current = camera_from_room * *tracked.room_from_model;
-      } else if (tracked.camera_from_model) {
-        current = tracked.camera_from_model;
-      }
+      const std::optional<Rigid3d>& current = overlay_poses.camera_from_model_current;
+      const std::optional<Rigid3d>& planned = overlay_poses.camera_from_model_planned;
       const std::string caption = StringPrintf("t %.3f s  frame %zu  %s%s%s", t, i, TrackingStateName(tracked.state),
                                                tracked.message.empty() ? "" : ": ",
                                                tracked.message.substr(0, 80).c_str());
       const cv::Mat image = overlay->Render(frame.color, current, planned, tracked.correction, caption);
       const std::filesystem::path file = options.out_dir / "overlay" / StringPrintf("%.6f.png", t);
       if (!cv::imwrite(file.string(), image)) ARPOS_INPUT_ERROR(file.string() << ": could not be written");
+    }
+    if (options.on_frame) {
+      TrackedFrameEvent event;
+      event.index = i;
+      event.count = sequence.size();
+      event.tracked = &tracked;
+      if (readable) event.colour = frame.color;
+      event.has_depth = readable && !frame.depth.empty();
+      event.poses = overlay_poses;
+      event.note = note;
+      options.on_frame(event);
     }
     if (options.progress) options.progress(i + 1, sequence.size());
   }

@@ -61,6 +61,27 @@ struct TrackingInputs {
 TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
                                   const std::string& patient_external_id);
 
+/// Where the overlay draws the model for a tracked frame: the current pose
+/// (camera_from_model, from the room poses when the camera is localised, else
+/// the body tracker's own) and the planned one (only with a camera pose).
+struct OverlayPoses {
+  std::optional<Rigid3d> camera_from_model_current;
+  std::optional<Rigid3d> camera_from_model_planned;
+};
+OverlayPoses OverlayPosesOf(const TrackedFrame& tracked, const Rigid3d& room_from_model_target);
+
+/// One frame as TrackSequence finished it, for a live display.
+struct TrackedFrameEvent {
+  size_t index = 0;  ///< frame index in the sequence
+  size_t count = 0;  ///< frames in the sequence
+  const TrackedFrame* tracked = nullptr;
+  /// The colour image (BGR); empty when the frame could not be read.
+  cv::Mat colour;
+  bool has_depth = false;  ///< the frame had a usable depth image
+  OverlayPoses poses;
+  std::string note;  ///< the frame's note as stored (gap, depth problem, why lost)
+};
+
 struct TrackSequenceOptions {
   std::filesystem::path sequence_dir;
   /// The run's name (the tracking/<name> folder name); empty: the folder's name.
@@ -84,12 +105,21 @@ struct TrackSequenceOptions {
   bool temporal_filter = true;
   /// Progress: frame index and count, after each frame.
   std::function<void(size_t, size_t)> progress;
+  /// Live use (the GUI). Called before frame `index` of `count` is read; may
+  /// block (pause) and returns false to stop: the frames so far are written
+  /// and stored as the run (result.stopped). Empty: every frame.
+  std::function<bool(size_t index, size_t count)> before_frame;
+  /// Called on the tracking thread after each frame, before the next is read.
+  std::function<void(const TrackedFrameEvent&)> on_frame;
 };
 
 struct TrackSequenceResult {
   TrackingRunId run_id;
   RecordingId recording_id;
   std::string name;
+  /// Stopped by options.before_frame after `frames` of `sequence_frames`.
+  bool stopped = false;
+  int sequence_frames = 0;
   int frames = 0, tracked = 0, carried = 0, lost = 0;
   int in_tolerance = 0, out_of_tolerance = 0;
   /// Frames lost while at least one mapped sticker was detected.

@@ -2,8 +2,13 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
+#include <iostream>
+#include <optional>
+#include <vector>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
@@ -184,6 +189,244 @@ TEST_F(GuiTest, PlanningPageShowsTheRoomMapMarkers) {
   }
   // Four or more markers of ~15 px squares seen from above.
   EXPECT_GT(orange, 200);
+}
+
+// ---------------------------------------------------------------- tracking page
+// The live positioning screen on the sample: a store filled by run-case
+// (plan, session, alignment), copied for each test. ctest runs each test in
+// its own process, so the store is kept in the artefacts folder and made
+// again only when the executable is newer (written aside, then renamed).
+class TrackingPageTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    if (!std::getenv("DISPLAY")) return;
+    namespace fs = std::filesystem;
+    fs::create_directories(ARPOS_GUI_ARTIFACTS_DIR);
+    sample_store_ = fs::path(ARPOS_GUI_ARTIFACTS_DIR) / "sample_store.db";
+    std::error_code ec;
+    if (fs::exists(sample_store_) && fs::last_write_time(sample_store_, ec) > fs::last_write_time(ARPOS_EXECUTABLE, ec)) {
+      suite_ok_ = true;
+      return;
+    }
+    TempDir dir("arpos_gui_tracking");
+    std::string out;
+    suite_ok_ = RunArpos("run-case " + Sample().string() + " --keep-open --store " + (dir.path() / "store.db").string(), &out) == 0;
+    if (!suite_ok_) {
+      std::cerr << out;
+      return;
+    }
+    const fs::path aside = sample_store_.string() + "." + std::to_string(::getpid());
+    fs::copy_file(dir.path() / "store.db", aside, fs::copy_options::overwrite_existing);
+    fs::rename(aside, sample_store_);
+  }
+  void SetUp() override {
+    if (!std::getenv("DISPLAY")) GTEST_SKIP() << "no X display: run through tools/test.sh (xvfb-run)";
+    ASSERT_TRUE(suite_ok_) << "run-case on the sample failed";
+    std::filesystem::copy_file(sample_store_, store());
+  }
+  static std::filesystem::path Sample() { return std::filesystem::path(ARPOS_SAMPLE_SESSIONS_DIR) / "demo_xtion"; }
+  std::filesystem::path store() const { return dir_.path() / "store.db"; }
+  // Runs the GUI on the tracking page; returns the screenshot (also kept in
+  // the artefacts folder, its path printed).
+  cv::Mat RunPage(const std::string& case_dir, const std::string& options, const std::string& artefact,
+                  std::string* output) {
+    const auto png = dir_.path() / (artefact + ".png");
+    EXPECT_EQ(RunArpos("gui --store " + store().string() + " --case " + case_dir + " --page 3 " + options +
+                           " --screenshot " + png.string(),
+                       output),
+              0)
+        << *output;
+    const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+    if (!shot.empty()) {
+      std::filesystem::create_directories(ARPOS_GUI_ARTIFACTS_DIR);
+      const auto kept = std::filesystem::path(ARPOS_GUI_ARTIFACTS_DIR) / (artefact + ".png");
+      cv::imwrite(kept.string(), shot);
+      std::cout << "screenshot: " << kept.string() << "\n";
+    }
+    return shot;
+  }
+  // The newest tracking run in the store (run-case stored the first).
+  std::optional<TrackingRunRecord> NewestRun(std::vector<TrackingFrameRecord>* frames) {
+    auto database = SqliteDatabase::Open(store().string());
+    std::optional<TrackingRunRecord> newest;
+    for (long long id = 1; id < 100; ++id) {
+      auto run = database->GetTrackingRun(TrackingRunId(id));
+      if (!run) break;
+      newest = run;
+    }
+    if (newest && frames) *frames = database->GetTrackingFrames(newest->id);
+    return newest;
+  }
+  int TrackingRunCount() {
+    auto database = SqliteDatabase::Open(store().string());
+    int n = 0;
+    while (database->GetTrackingRun(TrackingRunId(n + 1))) ++n;
+    return n;
+  }
+  TempDir dir_;
+  static std::filesystem::path sample_store_;
+  static bool suite_ok_;
+};
+std::filesystem::path TrackingPageTest::sample_store_;
+bool TrackingPageTest::suite_ok_ = false;
+
+// Pixels of `shot` within `roi` for which `pick` (BGR) holds.
+template <typename Pick>
+int CountPixels(const cv::Mat& shot, const cv::Rect& roi, Pick pick) {
+  int n = 0;
+  const cv::Rect r = roi & cv::Rect(0, 0, shot.cols, shot.rows);
+  for (int y = r.y; y < r.y + r.height; ++y) {
+    for (int x = r.x; x < r.x + r.width; ++x) n += pick(shot.at<cv::Vec3b>(y, x));
+  }
+  return n;
+}
+
+// Played to the end: the run with every frame is stored, and the page shows
+// the overlay (red current pose, blue planned pose) and the correction panel.
+TEST_F(TrackingPageTest, PlaysTheSequenceToTheEndAndStoresTheRun) {
+  const int runs_before = TrackingRunCount();
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(), "--play --fast --sequence tracking/seq_00 --screenshot-when-done",
+                               "tracking_page_end", &out);
+  ASSERT_FALSE(shot.empty());
+  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
+  EXPECT_EQ(TrackingRunCount(), runs_before + 1);
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(run->sequence_name, "seq_00");
+  EXPECT_EQ(frames.size(), 3u);  // the sample's tracking/seq_00
+  EXPECT_EQ(run->summary.find("stopped"), std::string::npos) << run->summary;
+
+  // The camera image with the overlay fills the left of the page, the
+  // correction panel the right. The sample's own frames have about 1000
+  // pixels that pass for the red tint (skin does not: its green is higher)
+  // and a few hundred blue ones, no light-blue outline.
+  const cv::Rect image_area(0, 0, shot.cols * 3 / 5, shot.rows * 3 / 4);
+  const int red = CountPixels(shot, image_area, [](const cv::Vec3b& p) {
+    return p[2] > 110 && p[2] > p[1] + 60 && p[1] < 130;
+  });
+  const int blue = CountPixels(shot, image_area, [](const cv::Vec3b& p) {
+    const bool fill = p[0] > 120 && p[0] > p[2] + 60 && p[0] > p[1] + 20;
+    const bool outline = p[0] > 200 && p[1] > 150 && p[2] < 160;
+    return fill || outline;
+  });
+  EXPECT_GT(red, 10000) << "no model at the current pose (red)";
+  EXPECT_GT(blue, 1500) << "no model at the planned pose (blue)";
+  // The panel: its dark background and a banner in a state colour (green,
+  // amber or red), on the right.
+  const cv::Rect panel_area(shot.cols * 3 / 5, 0, shot.cols * 2 / 5, shot.rows * 3 / 4);
+  const int panel_background = CountPixels(shot, panel_area, [](const cv::Vec3b& p) {
+    return std::abs(p[0] - 0x28) < 4 && std::abs(p[1] - 0x21) < 4 && std::abs(p[2] - 0x1e) < 4;
+  });
+  EXPECT_GT(panel_background, 20000) << "no correction panel";
+  const int banner = CountPixels(shot, panel_area, [](const cv::Vec3b& p) {
+    const bool green = std::abs(p[2] - 46) < 6 && std::abs(p[1] - 125) < 6 && std::abs(p[0] - 50) < 6;
+    const bool amber = std::abs(p[2] - 240) < 6 && std::abs(p[1] - 160) < 6 && p[0] < 8;
+    const bool lost = std::abs(p[2] - 198) < 6 && std::abs(p[1] - 40) < 6 && std::abs(p[0] - 40) < 6;
+    return green || amber || lost;
+  });
+  EXPECT_GT(banner, 5000) << "no state banner";
+}
+
+// Pause stops the frames: paused after the first, nothing more is tracked
+// for seconds (unpaused, the three frames take well under that); quitting
+// stores the one frame as a stopped run.
+TEST_F(TrackingPageTest, PauseStopsFrameAdvance) {
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(), "--play --fast --pause-after 1 --screenshot-delay 9000",
+                               "tracking_page_paused", &out);
+  ASSERT_FALSE(shot.empty());
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(frames.size(), 1u);
+  EXPECT_NE(run->summary.find("stopped after 1 of 3 frames"), std::string::npos) << run->summary;
+}
+
+// Step tracks one frame at a time: two presses (the first starts the run
+// paused), then nothing more until the window closes and the two frames are
+// stored as a stopped run.
+TEST_F(TrackingPageTest, StepTracksOneFrameAtATime) {
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(), "--steps 2 --screenshot-delay 8000", "tracking_page_stepped", &out);
+  ASSERT_FALSE(shot.empty());
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(frames.size(), 2u) << run->summary;
+  EXPECT_NE(run->summary.find("stopped after 2 of 3 frames"), std::string::npos) << run->summary;
+}
+
+// A frame without its depth image is a frame with a stated state and note:
+// paused on it, the page says so (red line under the plot) and shows the
+// frame lost; played through, the run goes on to the end.
+TEST_F(TrackingPageTest, MissingDepthFrameIsStatedNotFatal) {
+  const auto case_dir = dir_.path() / "demo_xtion";
+  std::filesystem::copy(Sample(), case_dir, std::filesystem::copy_options::recursive);
+  // The second frame's depth image goes missing.
+  std::vector<std::filesystem::path> depth;
+  for (const auto& e : std::filesystem::directory_iterator(case_dir / "tracking" / "seq_00" / "depth")) {
+    depth.push_back(e.path());
+  }
+  std::sort(depth.begin(), depth.end());
+  ASSERT_EQ(depth.size(), 3u);
+  std::filesystem::remove(depth[1]);
+
+  std::string out;
+  const cv::Mat paused = RunPage(case_dir.string(), "--play --fast --pause-after 2 --screenshot-delay 7000",
+                                 "tracking_page_no_depth_frame", &out);
+  ASSERT_FALSE(paused.empty());
+  std::vector<TrackingFrameRecord> frames;
+  auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  ASSERT_EQ(frames.size(), 2u) << run->summary;
+  EXPECT_NE(frames[1].note.find("depth"), std::string::npos) << frames[1].note;
+  // The frame line (under the plot) in red: "(no depth image)".
+  const cv::Rect lines(0, paused.rows * 84 / 100, paused.cols * 7 / 10, paused.rows * 11 / 100);
+  const int red_text = CountPixels(paused, lines, [](const cv::Vec3b& p) {
+    return p[2] > 150 && p[1] < 90 && p[0] < 90;
+  });
+  EXPECT_GT(red_text, 100) << "the missing depth image is not stated";
+  const cv::Rect panel_area(paused.cols * 3 / 5, 0, paused.cols * 2 / 5, paused.rows * 3 / 4);
+  const int lost_banner = CountPixels(paused, panel_area, [](const cv::Vec3b& p) {
+    return std::abs(p[2] - 198) < 6 && std::abs(p[1] - 40) < 6 && std::abs(p[0] - 40) < 6;
+  });
+  EXPECT_GT(lost_banner, 5000) << "no TRACKING LOST banner";
+
+  out.clear();
+  const cv::Mat end = RunPage(case_dir.string(), "--play --fast --screenshot-when-done", "tracking_page_no_depth_end", &out);
+  ASSERT_FALSE(end.empty());
+  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
+  run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  ASSERT_EQ(frames.size(), 3u);
+  EXPECT_NE(frames[1].note.find("depth"), std::string::npos) << frames[1].note;
+}
+
+// Closing the window while a run goes on asks first. No: the window stays
+// (the screenshot is taken later). Yes: it closes at once and the frames
+// tracked so far are stored as a stopped run.
+TEST_F(TrackingPageTest, ClosingWhileTrackingAsksFirst) {
+  const int runs_before = TrackingRunCount();
+  std::string out;
+  const auto common = "gui --store " + store().string() + " --case " + Sample().string() +
+                      " --page 3 --play --fast --pause-after 1 --close-after 4000 --screenshot-delay 8000";
+  const auto kept_png = dir_.path() / "kept.png";
+  ASSERT_EQ(RunArpos(common + " --answer-close no --screenshot " + kept_png.string(), &out), 0) << out;
+  EXPECT_NE(out.find("asked \"Stop tracking?"), std::string::npos) << out;
+  EXPECT_TRUE(std::filesystem::exists(kept_png)) << "the window closed although the answer was no";
+
+  out.clear();
+  const auto closed_png = dir_.path() / "closed.png";
+  ASSERT_EQ(RunArpos(common + " --answer-close yes --screenshot " + closed_png.string(), &out), 0) << out;
+  EXPECT_NE(out.find("asked \"Stop tracking?"), std::string::npos) << out;
+  EXPECT_FALSE(std::filesystem::exists(closed_png)) << "the window stayed open although the answer was yes";
+  EXPECT_NE(out.find("tracking run stored: stopped after 1 of 3 frames"), std::string::npos) << out;
+  EXPECT_EQ(TrackingRunCount(), runs_before + 2);
+  std::vector<TrackingFrameRecord> frames;
+  ASSERT_TRUE(NewestRun(&frames).has_value());
+  EXPECT_EQ(frames.size(), 1u);
 }
 
 }  // namespace

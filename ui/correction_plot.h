@@ -1,0 +1,42 @@
+#pragma once
+/// The couch correction over the last seconds of the recording: translations
+/// (lateral, longitudinal, vertical, mm) above, rotations (pitch, roll, yaw,
+/// deg) below, each with its tolerance as dashed lines; frames without a
+/// pose as red bands (the lines break there).
+
+#include <QWidget>
+#include <array>
+#include <deque>
+
+#include "feedback/couch_correction.h"
+
+namespace arpos::ui {
+
+class CorrectionPlot : public QWidget {
+  Q_OBJECT
+ public:
+  explicit CorrectionPlot(QWidget* parent = nullptr);
+  void SetTolerances(const CouchTolerances& tolerances);
+  /// Seconds of recording time shown (default 10).
+  void SetWindow(double seconds);
+  void Add(double timestamp_s, const CouchCorrection& correction);
+  void Clear();
+  QSize sizeHint() const override { return QSize(600, 200); }
+
+ protected:
+  void paintEvent(QPaintEvent* event) override;
+
+ private:
+  struct Sample {
+    double t;
+    std::array<double, 6> values;
+    CorrectionState state;
+  };
+  void PaintPanel(class QPainter* painter, const QRectF& area, int first_axis, double tolerance,
+                  const QString& unit, double t_end) const;
+  CouchTolerances tolerances_;
+  double window_s_ = 10.0;
+  std::deque<Sample> samples_;
+};
+
+}  // namespace arpos::ui
