@@ -287,7 +287,8 @@ void SessionController::Run() {
   const CameraIntrinsics& camera = folder.config.camera;
   const bool may_use_unapproved = options_.unapproved || options_.op.role == Role::kResearch;
   PlanId plan_id = ChoosePlanForSession(database_, options_.plan_id, CasePatientId(folder.root),
-                                        !may_use_unapproved, &result_.plan_choice);
+                                        !may_use_unapproved, options_.op.role == Role::kResearch,
+                                        &result_.plan_choice);
   RoomMapId room_map_id;
   RoomMap room_map = LoadRoomMapForLocalization(database_, plan_id, CasePatientId(folder.root), &plan_id, &room_map_id);
   const std::optional<PlanRecord> plan = database_->GetPlan(plan_id);

@@ -57,7 +57,7 @@ int RunSessionCommand(const std::vector<std::string>& argv) {
       "or a research run (no role: any plan, recorded as not approved).\n"
       "  --store DB                session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
       "  --plan ID                 plan to use (default: the case's patient's one approved plan\n"
-      "                            with a room map; several are refused)\n"
+      "                            with a room map; several are refused, a research run takes the newest)\n"
       "  --unapproved              run on a plan that is not approved (tests, research;\n"
       "                            recorded in the session and the audit log)\n"
       "  --initial-alignment FILE  4x4 row-major reference-model -> room pose to start from\n"

@@ -25,7 +25,7 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
       "Writes DIR/poses.txt, camera_poses.txt, corrections.csv, timing.csv (and\n"
       "overlay/<timestamp>.png with --overlay) and stores the run with every frame.\n"
       "Without --session, the one open session of the case's patient is used (the case\n"
-      "folder above SEQ_DIR; several open sessions are refused). Tracking is for a\n"
+      "folder above SEQ_DIR; several open sessions are refused, a research run takes the newest). Tracking is for a\n"
       "therapist (--role therapist) or a research run (no role), on an open session.\n"
       "  --store DB          session store (default: $ARPOS_STORE, else ./arpos_store.db)\n"
       "  --session ID        track against this session's stickers and alignment\n"
@@ -92,7 +92,8 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
   RecoverInterruptedSessions(database.get());
   options.op = ResolveOperator(GivenOperatorFlags().user, GivenOperatorFlags().role);
   RequirePermission(options.op, Action::kTrack);
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), session, CasePatientId(*case_root));
+  const TrackingInputs inputs = LoadTrackingInputs(database.get(), session, CasePatientId(*case_root),
+                                                   options.op.role == Role::kResearch);
   std::cerr << "session: " << inputs.session_choice << "\n";
   std::cerr << StringPrintf("tracking against session %lld (plan %lld, room map %lld, %zu stickers)\n",
                             static_cast<long long>(inputs.session_id.value()),

@@ -263,7 +263,7 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
 }
 
 PlanId ChoosePlanForSession(Database* database, std::optional<PlanId> given, const std::string& patient_external_id,
-                            bool need_approved, std::string* said) {
+                            bool need_approved, bool newest_if_several, std::string* said) {
   auto describe = [&](PlanId id, const std::string& name, const std::string& approval) {
     return "plan " + std::to_string(id.value()) + " \"" + name + "\" (" + approval + ")";
   };
@@ -308,6 +308,14 @@ PlanId ChoosePlanForSession(Database* database, std::optional<PlanId> given, con
     std::string list;
     for (const PlanSummary& p : candidates) {
       list += (list.empty() ? "" : "; ") + describe(p.id, p.name, DescribeApproval(p));
+    }
+    if (newest_if_several) {  // ListPlans is newest first
+      const PlanSummary& p = candidates.front();
+      ARPOS_WARN("patient " << patient_external_id << " has " << candidates.size()
+                            << " plans with a room map (" << list << "): this research run takes the newest");
+      if (said) *said = "using " + describe(p.id, p.name, DescribeApproval(p)) + ", the newest of " +
+                        std::to_string(candidates.size()) + " (research run; give --plan ID to choose)";
+      return p.id;
     }
     ARPOS_INPUT_ERROR("patient " << patient_external_id << " has " << candidates.size() << " "
                                  << (candidates.front().approved() ? "approved plans" : "plans with a room map")

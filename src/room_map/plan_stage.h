@@ -108,8 +108,10 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
 /// refused with their ids ("choose one with --plan ID"); none is refused
 /// with what is missing (no plan, no room map, not approved and who
 /// approves). `said` receives a line for the user: which plan and why.
+/// `newest_if_several`: a research run takes the newest of several and says
+/// so (scripts that plan a case twice keep working); clinical roles choose.
 PlanId ChoosePlanForSession(Database* database, std::optional<PlanId> given, const std::string& patient_external_id,
-                            bool need_approved, std::string* said = nullptr);
+                            bool need_approved, bool newest_if_several = false, std::string* said = nullptr);
 
 /// The room map to localise against: the newest map of `plan` if given, else
 /// of the newest plan (with a map) of the patient `patient_external_id`, else

@@ -45,7 +45,7 @@ std::optional<SessionPieces> PiecesOf(Database* database, SessionId session) {
 }  // namespace
 
 TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
-                                  const std::string& patient_external_id) {
+                                  const std::string& patient_external_id, bool newest_if_several) {
   ARPOS_CHECK(database != nullptr, "tracking needs a session store");
   std::optional<SessionPieces> pieces;
   SessionId chosen;
@@ -83,21 +83,35 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
         usable.push_back(s);
       }
     }
+    std::sort(usable.begin(), usable.end(), [](const SessionRecord& a, const SessionRecord& b) {
+      return a.started_unix_ms != b.started_unix_ms ? a.started_unix_ms > b.started_unix_ms
+                                                    : a.id.value() > b.id.value();
+    });
+    std::string others;
     if (usable.size() > 1) {
       std::string ids;
       for (const auto& s : usable) ids += (ids.empty() ? "" : ", ") + std::to_string(s.id.value());
-      ARPOS_INPUT_ERROR(whose << " has " << usable.size() << " open sessions (" << ids
-                              << "): choose one with --session ID (and complete or abort the others: "
-                                 "arpos session complete|abort ID)");
+      others = ids;
+      if (!newest_if_several) {
+        ARPOS_INPUT_ERROR(whose << " has " << usable.size() << " open sessions (" << ids
+                                << "): choose one with --session ID (and complete or abort the others: "
+                                   "arpos session complete|abort ID)");
+      }
     }
     if (usable.empty()) {
       ARPOS_INPUT_ERROR(whose << " has no open session with a body marker map and an alignment"
-                              << (closed > 0 ? " (" + std::to_string(closed) + " completed or aborted)" : "")
+                              << (closed > 0 ? " (" + std::to_string(closed) +
+                                                   " completed or aborted; run-case completes its session at the "
+                                                   "end unless --keep-open)"
+                                             : "")
                               << ": run `arpos session CASE` first");
     }
     chosen = usable.front().id;
     pieces = PiecesOf(database, chosen);
-    said = "session " + std::to_string(chosen.value()) + ", the only open session of " + whose;
+    said = "session " + std::to_string(chosen.value()) +
+           (others.empty() ? ", the only open session of " + whose
+                           : ", the newest of the open sessions of " + whose + " (" + others +
+                                 "; research run: give --session ID to choose)");
   }
   TrackingInputs in;
   in.session_id = chosen;

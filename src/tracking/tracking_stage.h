@@ -58,8 +58,10 @@ struct TrackingInputs {
 /// `patient_external_id`, or of the store if it does not know the patient;
 /// several open sessions are refused ("choose one with --session ID").
 /// Throws InputError saying what is missing and which command makes it.
+/// `newest_if_several`: a research run takes the newest of several open
+/// sessions and says so; clinical roles choose.
 TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
-                                  const std::string& patient_external_id);
+                                  const std::string& patient_external_id, bool newest_if_several = false);
 
 /// Where the overlay draws the model for a tracked frame: the current pose
 /// (camera_from_model, from the room poses when the camera is localised, else

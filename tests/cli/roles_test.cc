@@ -171,6 +171,22 @@ TEST_F(Roles, NoRoleIsAResearchRunThatMayDoAllButApprove) {
   EXPECT_EQ(Value(store(), "SELECT status || ' ' || on_unapproved_plan || ' ' || ended_by FROM sessions"),
             "completed 1 rex (research: no role given)");
   EXPECT_EQ(Value(store(), "SELECT approved_unix_ms IS NULL FROM plans"), "1");
+  // Tracking after run-case: its session is completed, so tracking says why not.
+  r = RunArpos("track " + Seq() + S() + " --out " + (dir_.path() / "t0").string());
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_TRUE(Contains(r.output, "run-case completes its session at the end unless --keep-open")) << r.output;
+  // Two open sessions: a research run takes the newest and says so; a
+  // therapist must choose.
+  for (int i = 0; i < 2; ++i) {
+    r = RunArpos("session " + Case() + S() + " --unapproved");
+    ASSERT_EQ(r.status, 0) << r.output;
+  }
+  r = RunArpos("track " + Seq() + S() + " --out " + (dir_.path() / "t1").string());
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(Contains(r.output, "session 3, the newest of the open sessions of patient demo_xtion (3, 2;")) << r.output;
+  r = RunArpos("track " + Seq() + S() + " --out " + (dir_.path() / "t2").string() + " " + kTherapist);
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_TRUE(Contains(r.output, "has 2 open sessions (3, 2): choose one with --session ID")) << r.output;
   r = RunArpos("run-case " + Case() + S() + " --quick " + kTherapist);
   EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_TRUE(Contains(r.output, "run-case) is for a research run")) << r.output;

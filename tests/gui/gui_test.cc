@@ -30,6 +30,16 @@ int RunArpos(const std::string& args, std::string* output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+// Keeps a screenshot in the artefacts folder for a person to look at and
+// prints its path.
+void KeepScreenshot(const cv::Mat& shot, const std::string& name) {
+  if (shot.empty()) return;
+  std::filesystem::create_directories(ARPOS_GUI_ARTIFACTS_DIR);
+  const auto kept = std::filesystem::path(ARPOS_GUI_ARTIFACTS_DIR) / (name + ".png");
+  cv::imwrite(kept.string(), shot);
+  std::cout << "screenshot: " << kept.string() << "\n";
+}
+
 class GuiTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -59,7 +69,9 @@ class GuiTest : public ::testing::Test {
                        &out),
               0)
         << out;
-    return cv::imread(png.string(), cv::IMREAD_COLOR);
+    const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+    KeepScreenshot(shot, "tiny_case_page" + std::to_string(page));
+    return shot;
   }
   TempDir dir_;
 };
@@ -97,6 +109,7 @@ TEST_F(GuiTest, AuditPageShowsWhetherTheLogVerifies) {
   EXPECT_GT(count(verified, true), 2000) << "no green verification line";
   EXPECT_LT(count(verified, false), 200);
   cv::imwrite((dir_.path() / "audit_verified.png").string(), verified);
+  KeepScreenshot(verified, "audit_verified");
   {
     auto database = SqliteDatabase::Open(store().string());
     char* error = nullptr;
@@ -151,6 +164,7 @@ TEST_F(GuiTest, SessionPageColoursTheSurfaceByItsDistanceToTheAlignedModel) {
             0)
       << out;
   const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+  KeepScreenshot(shot, "sample_session_page");
   ASSERT_FALSE(shot.empty());
   int red = 0, green = 0;
   for (int y = 0; y < shot.rows; ++y) {
@@ -179,6 +193,7 @@ TEST_F(GuiTest, PlanningPageShowsTheRoomMapMarkers) {
             0)
       << out;
   const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
+  KeepScreenshot(shot, "sample_planning_page");
   ASSERT_FALSE(shot.empty());
   int orange = 0;
   for (int y = 0; y < shot.rows; ++y) {
