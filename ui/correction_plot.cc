@@ -41,10 +41,24 @@ void CorrectionPlot::SetWindow(double seconds) {
 
 void CorrectionPlot::Clear() {
   samples_.clear();
+  whole_run_ = false;
+  update();
+}
+
+void CorrectionPlot::SetRun(const std::vector<std::pair<double, CouchCorrection>>& frames) {
+  samples_.clear();
+  whole_run_ = true;
+  for (const auto& [t, c] : frames) {
+    samples_.push_back({t, {c.lateral_mm, c.longitudinal_mm, c.vertical_mm, c.pitch_deg, c.roll_deg, c.yaw_deg}, c.state});
+  }
+  const double t0 = samples_.empty() ? 0 : samples_.front().t;
+  const double span = samples_.empty() ? 1 : samples_.back().t - t0;
+  window_s_ = std::max(1.0, span / 0.98);
   update();
 }
 
 void CorrectionPlot::Add(double timestamp_s, const CouchCorrection& c) {
+  if (whole_run_) Clear();
   // A replay that starts again (or a step back in time) starts a new plot.
   if (!samples_.empty() && timestamp_s < samples_.back().t) samples_.clear();
   samples_.push_back({timestamp_s,
@@ -60,7 +74,8 @@ void CorrectionPlot::paintEvent(QPaintEvent*) {
   painter.setRenderHint(QPainter::Antialiasing);
   painter.fillRect(rect(), QColor(30, 33, 40));
   // A little room right of the newest frame so its points are not cut.
-  const double t_end = (samples_.empty() ? 0 : samples_.back().t) + 0.02 * window_s_;
+  const double t_end = whole_run_ ? (samples_.empty() ? 0 : samples_.front().t) + window_s_
+                                  : (samples_.empty() ? 0 : samples_.back().t) + 0.02 * window_s_;
   const double gap = 8;
   const double half = (height() - gap - 18) / 2.0;  // 18 px of time labels at the bottom
   PaintPanel(&painter, QRectF(0, 0, width(), half), 0, tolerances_.translation_mm, "mm", t_end);
@@ -71,6 +86,18 @@ void CorrectionPlot::paintEvent(QPaintEvent*) {
   QFont font = painter.font();
   font.setPixelSize(11);
   painter.setFont(font);
+  if (whole_run_) {
+    // Seconds since the run's first frame, at a step that gives ~8 labels.
+    const double step = NiceCeil(window_s_ / 8);
+    for (double s = 0; s <= 0.98 * window_s_ + 1e-9; s += step) {
+      const double x = left + (right - left) * s / window_s_;
+      painter.drawText(QRectF(x - 30, height() - 16, 60, 14), Qt::AlignCenter, tr("%1 s").arg(s, 0, 'g', 4));
+    }
+    if (samples_.empty()) {
+      painter.drawText(rect(), Qt::AlignCenter, tr("this run stored no frames"));
+    }
+    return;
+  }
   const int step = window_s_ > 12 ? 5 : 2;
   for (int s = 0; s <= static_cast<int>(0.98 * window_s_); s += step) {
     const double x = right - (right - left) * (s + 0.02 * window_s_) / window_s_;

@@ -7,6 +7,8 @@
 #include <QWidget>
 #include <array>
 #include <deque>
+#include <utility>
+#include <vector>
 
 #include "feedback/couch_correction.h"
 
@@ -20,6 +22,10 @@ class CorrectionPlot : public QWidget {
   /// Seconds of recording time shown (default 10).
   void SetWindow(double seconds);
   void Add(double timestamp_s, const CouchCorrection& correction);
+  /// A whole stored run at once (the audit page): the time axis spans it
+  /// from its first frame (0 s) to its last; nothing is dropped. Add and
+  /// Clear go back to the live, sliding window.
+  void SetRun(const std::vector<std::pair<double, CouchCorrection>>& frames);
   void Clear();
   QSize sizeHint() const override { return QSize(600, 200); }
 
@@ -36,6 +42,7 @@ class CorrectionPlot : public QWidget {
                   const QString& unit, double t_end) const;
   CouchTolerances tolerances_;
   double window_s_ = 10.0;
+  bool whole_run_ = false;  ///< SetRun: time from the first sample, not back from now
   std::deque<Sample> samples_;
 };
 
