@@ -154,7 +154,7 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   splitter->setStretchFactor(0, 2);
   splitter->setStretchFactor(1, 4);
   splitter->setStretchFactor(2, 4);
-  splitter->setSizes({260, 520, 460});
+  splitter->setSizes({320, 400, 380});
 
   auto* export_button = new QPushButton(tr("Export report…"), this);
   connect(export_button, &QPushButton::clicked, this, &AuditPage::ExportReport);
@@ -254,7 +254,7 @@ void AuditPage::BuildTree() {
       const QString approval = p.approved() ? tr("approved by %1").arg(Q(p.approved_by)) : tr("not approved");
       auto* plan_node = AddNode(patient_node, tr("Plan %1: %2 — %3").arg(p.id.value()).arg(Q(p.name)).arg(approval),
                                 Entity("plan", p.id.value()), 0);
-      if (!p.approved()) plan_node->setForeground(0, QColor(183, 28, 28));
+      if (!p.approved()) plan_node->setForeground(0, QColor(150, 70, 0));  // dark amber, not the verification red
       plan_node->setData(0, kCoveredRole, room_maps_by_plan[p.id.value()]);
       std::vector<SessionRecord> sessions = db->ListSessions(p.id);
       std::reverse(sessions.begin(), sessions.end());
@@ -265,7 +265,7 @@ void AuditPage::BuildTree() {
         if (!s.ended_by.empty()) line += tr(", ended by %1").arg(Q(s.ended_by));
         if (s.on_unapproved_plan) line += tr(" — plan not approved");
         auto* session_node = AddNode(plan_node, line, Entity("session", sid), sid);
-        if (s.on_unapproved_plan) session_node->setForeground(0, QColor(183, 28, 28));
+        if (s.on_unapproved_plan) session_node->setForeground(0, QColor(150, 70, 0));  // dark amber, not the verification red
         std::unique_ptr<SessionReport> report;
         try {
           report = std::make_unique<SessionReport>(GatherSessionReport(db, s.id, state_->options.store_path));
@@ -362,7 +362,7 @@ void AuditPage::ApplyFilters() {
     if (bad) bad_row = row;
   }
   table_->resizeColumnsToContents();
-  for (int c = 0; c < 4; ++c) table_->setColumnWidth(c, std::min(table_->columnWidth(c), 220));
+  for (int c = 0; c < 4; ++c) table_->setColumnWidth(c, std::min(table_->columnWidth(c), 170));
   if (bad_row >= 0) table_->scrollToItem(table_->item(bad_row, 0));
   count_label_->setText(tr("%1 of %2 entries").arg(table_->rowCount()).arg(entries_.size()));
 }
