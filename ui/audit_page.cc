@@ -115,13 +115,13 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   table_->setSelectionBehavior(QAbstractItemView::SelectRows);
   table_->verticalHeader()->setVisible(false);
   auto* filters = new QHBoxLayout;
-  filters->addWidget(text_filter_, 1);
-  filters->addWidget(action_filter_);
+  filters->addWidget(action_filter_, 1);
   filters->addWidget(age_filter_);
+  filters->addWidget(count_label_);
   auto* table_layout = new QVBoxLayout(table_panel);
   table_layout->setContentsMargins(0, 0, 0, 0);
+  table_layout->addWidget(text_filter_);
   table_layout->addLayout(filters);
-  table_layout->addWidget(count_label_);
   table_layout->addWidget(table_, 1);
 
   auto* detail_panel = new QWidget(this);
@@ -362,7 +362,7 @@ void AuditPage::ApplyFilters() {
     if (bad) bad_row = row;
   }
   table_->resizeColumnsToContents();
-  for (int c = 0; c < 4; ++c) table_->setColumnWidth(c, std::min(table_->columnWidth(c), 170));
+  for (int c = 1; c < 4; ++c) table_->setColumnWidth(c, std::min(table_->columnWidth(c), 170));
   if (bad_row >= 0) table_->scrollToItem(table_->item(bad_row, 0));
   count_label_->setText(tr("%1 of %2 entries").arg(table_->rowCount()).arg(entries_.size()));
 }

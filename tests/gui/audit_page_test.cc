@@ -197,5 +197,47 @@ TEST_F(AuditPageTest, TextAndActionFiltersNarrowTheTable) {
   for (int row = 0; row < table_->rowCount(); ++row) EXPECT_EQ(table_->item(row, 2)->text(), chosen);
 }
 
+// The executable's --select and --filter (page 4): a run's node shows its
+// plot (the plot's dark background and the lateral axis' light blue, absent
+// from the whole log's screenshot) and fewer entries; the filter narrows.
+TEST_F(AuditPageTest, SelectOptionShowsTheRunInTheScreenshot) {
+  wizard_.reset();
+  auto shoot = [](const std::string& extra, const std::string& png, std::string* out) {
+    return RunArpos("gui --store " + Store() + " --case " + Sample().string() + " --page 4 " + extra +
+                        " --screenshot " + png,
+                    out);
+  };
+  const std::string whole_png = (dir_->path() / "whole.png").string();
+  const std::string run_png = (dir_->path() / "run.png").string();
+  std::string out;
+  ASSERT_EQ(shoot("", whole_png, &out), 0) << out;
+  out.clear();
+  ASSERT_EQ(shoot("--select tracking_run:1", run_png, &out), 0) << out;
+  EXPECT_NE(out.find("arpos gui: audit shows 1 of "), std::string::npos) << out;
+  auto count = [](const QImage& image, QColor want, int within) {
+    int n = 0;
+    for (int y = 0; y < image.height(); ++y) {
+      for (int x = 0; x < image.width(); ++x) {
+        const QColor c = image.pixelColor(x, y);
+        n += std::abs(c.red() - want.red()) <= within && std::abs(c.green() - want.green()) <= within &&
+             std::abs(c.blue() - want.blue()) <= within;
+      }
+    }
+    return n;
+  };
+  const QImage whole(QString::fromStdString(whole_png)), run(QString::fromStdString(run_png));
+  ASSERT_FALSE(whole.isNull());
+  ASSERT_FALSE(run.isNull());
+  const QColor background(22, 24, 30), lateral(79, 195, 247);
+  EXPECT_GT(count(run, background, 2), 8000);
+  EXPECT_LT(count(whole, background, 2), 1000);
+  EXPECT_GT(count(run, lateral, 15), count(whole, lateral, 15) + 80);
+  out.clear();
+  // The session's two alignments (automatic, then ICP), case-insensitively.
+  ASSERT_EQ(shoot("--select session:1 --filter ADD_ALIGNMENT", (dir_->path() / "filtered.png").string(), &out), 0)
+      << out;
+  EXPECT_NE(out.find("arpos gui: audit shows 2 of "), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace arpos
