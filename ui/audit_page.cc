@@ -432,6 +432,9 @@ void AuditPage::ShowRun(const SessionReport& report, long long run_id) {
       c.pitch_deg = f.correction->rotation_deg.x();
       c.roll_deg = f.correction->rotation_deg.y();
       c.yaw_deg = f.correction->rotation_deg.z();
+      // As the report measures them (report/session_report.h).
+      c.translation_mm = f.correction->translation_mm.norm();
+      c.rotation_deg = f.correction->rotation_deg.norm();
     } else {
       c.state = CorrectionState::kLost;
     }
@@ -464,7 +467,8 @@ void AuditPage::ShowRun(const SessionReport& report, long long run_id) {
                .arg(ms(run->latency_mean_ms))
                .arg(ms(run->latency_p95_ms))
                .arg(run->latency_frames);
-  lines << tr("Red bands: frames without a pose; green band: the tolerance.");
+  lines << tr("White: the shift's length and the turn's angle; red bands: frames without a pose; green band: "
+              "the tolerance.");
   if (!run->run.summary.empty()) lines << Q(run->run.summary);
   detail_text_->setText(lines.join("\n"));
 }
@@ -488,9 +492,9 @@ void AuditPage::ShowDetail(QTreeWidgetItem* item) {
   bool three_d = false;
   try {
     if (entity.isEmpty()) {
-      lines << tr("%1 audit entries; %2 sessions in the store. Choose a patient, plan, session or run at the left.")
-                   .arg(entries_.size())
-                   .arg(reports_.size());
+      lines << tr("%1 audit entries; %n session(s) in the store. Choose a patient, plan, session or run at the "
+                  "left.", "", static_cast<int>(reports_.size()))
+                   .arg(entries_.size());
     } else if (kind == "patient") {
       lines << tr("%1 plan(s) under this patient.").arg(item->childCount());
     } else if (kind == "plan") {

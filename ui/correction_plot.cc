@@ -49,7 +49,10 @@ void CorrectionPlot::SetRun(const std::vector<std::pair<double, CouchCorrection>
   samples_.clear();
   whole_run_ = true;
   for (const auto& [t, c] : frames) {
-    samples_.push_back({t, {c.lateral_mm, c.longitudinal_mm, c.vertical_mm, c.pitch_deg, c.roll_deg, c.yaw_deg}, c.state});
+    samples_.push_back({t,
+                        {c.lateral_mm, c.longitudinal_mm, c.vertical_mm, c.pitch_deg, c.roll_deg, c.yaw_deg},
+                        c.state,
+                        {c.translation_mm, c.rotation_deg}});
   }
   const double t0 = samples_.empty() ? 0 : samples_.front().t;
   const double span = samples_.empty() ? 1 : samples_.back().t - t0;
@@ -115,10 +118,16 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   const double left = 56, right = area.width() - 118;
   const QRectF plot(area.left() + left, area.top() + 4, right - left, area.height() - 8);
   const double t_begin = t_end - window_s_;
+  // The three axes, and on whole runs the magnitude (shift length, angle).
+  const int lines = whole_run_ ? 4 : 3;
+  auto value = [first_axis](const Sample& s, int k) {
+    return k < 3 ? s.values[first_axis + k] : s.magnitudes[first_axis / 3];
+  };
+  auto color_of = [](int k) { return k < 3 ? kAxisColors[k] : QColor(245, 245, 245); };
   double extent = 1.5 * tolerance;
   for (const Sample& s : samples_) {
     if (s.state == CorrectionState::kLost || s.t < t_begin) continue;
-    for (int a = first_axis; a < first_axis + 3; ++a) extent = std::max(extent, 1.1 * std::abs(s.values[a]));
+    for (int k = 0; k < lines; ++k) extent = std::max(extent, 1.1 * std::abs(value(s, k)));
   }
   extent = NiceCeil(extent);
   auto X = [&](double t) { return plot.left() + plot.width() * (t - t_begin) / window_s_; };
@@ -145,8 +154,8 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   painter->setPen(QPen(QColor(90, 96, 108), 1));
   painter->drawLine(QPointF(plot.left(), Y(0)), QPointF(plot.right(), Y(0)));
   // One line per axis, broken where a frame has no pose.
-  for (int a = first_axis; a < first_axis + 3; ++a) {
-    const QColor color = kAxisColors[a - first_axis];
+  for (int k = 0; k < lines; ++k) {
+    const QColor color = color_of(k);
     painter->setPen(QPen(color, 2));
     QPainterPath path;
     bool open = false;
@@ -155,7 +164,7 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
         open = false;
         continue;
       }
-      const QPointF p(X(s.t), Y(s.values[a]));
+      const QPointF p(X(s.t), Y(value(s, k)));
       if (open) {
         path.lineTo(p);
       } else {
@@ -166,7 +175,7 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
     painter->drawPath(path);
     painter->setBrush(color);
     for (const Sample& s : samples_) {
-      if (s.state != CorrectionState::kLost) painter->drawEllipse(QPointF(X(s.t), Y(s.values[a])), 2.5, 2.5);
+      if (s.state != CorrectionState::kLost) painter->drawEllipse(QPointF(X(s.t), Y(value(s, k))), 2.5, 2.5);
     }
     painter->setBrush(Qt::NoBrush);
   }
@@ -195,15 +204,16 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   painter->setPen(QColor(170, 176, 188));
   painter->drawText(QRectF(area.left() + 2, area.top() + area.height() / 2 - 7, 24, 14), Qt::AlignLeft, unit);
   // Legend at the right.
-  for (int a = first_axis; a < first_axis + 3; ++a) {
-    const double y = area.top() + 10 + (a - first_axis) * 16;
-    painter->setPen(QPen(kAxisColors[a - first_axis], 3));
+  for (int k = 0; k < lines; ++k) {
+    const double y = area.top() + 10 + k * 16;
+    painter->setPen(QPen(color_of(k), 3));
     painter->drawLine(QPointF(right + 8, y), QPointF(right + 24, y));
     painter->setPen(QColor(200, 204, 214));
-    painter->drawText(QRectF(right + 28, y - 7, 90, 14), Qt::AlignLeft | Qt::AlignVCenter, tr(kAxisNames[a]));
+    painter->drawText(QRectF(right + 28, y - 7, 90, 14), Qt::AlignLeft | Qt::AlignVCenter,
+                      k < 3 ? tr(kAxisNames[first_axis + k]) : (first_axis == 0 ? tr("|shift|") : tr("angle")));
   }
   painter->setPen(QPen(QColor(102, 187, 106), 1.2, Qt::DashLine));
-  const double y = area.top() + 10 + 3 * 16;
+  const double y = area.top() + 10 + lines * 16;
   painter->drawLine(QPointF(right + 8, y), QPointF(right + 24, y));
   painter->setPen(QColor(200, 204, 214));
   painter->drawText(QRectF(right + 28, y - 7, 90, 14), Qt::AlignLeft | Qt::AlignVCenter,

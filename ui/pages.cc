@@ -821,4 +821,6 @@ void SessionPage::RunSessionStage() {
   UpdateButtons();
 }
 
+// The audit page (AuditPage) is in ui/audit_page.cc.
+
 }  // namespace arpos::ui
