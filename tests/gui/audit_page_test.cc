@@ -133,24 +133,24 @@ TEST_F(AuditPageTest, SelectingARunFiltersTheTableAndPlotsTheRun) {
     EXPECT_EQ(table_->item(row, 4)->toolTip(), table_->item(row, 4)->text());
   }
   // The run's plot: visible, with the axes' colours (lateral and pitch light
-  // blue: legend and points), the dashed tolerance lines and the sample run's
-  // lost frame as a red band.
+  // blue: legend and points), the magnitudes in white, the dashed tolerance
+  // lines and the sample run's lost frame as a red band.
   QWidget* plot = page_->findChild<QWidget*>("audit_run_plot");
   ASSERT_NE(plot, nullptr);
   ASSERT_TRUE(plot->isVisible());
   const QImage image = plot->grab().toImage();
-  int blue = 0, tolerance_green = 0, lost_red = 0;
+  int blue = 0, tolerance_green = 0, lost_red = 0, white = 0;
   for (int y = 0; y < image.height(); ++y) {
     for (int x = 0; x < image.width(); ++x) {
       const QColor c = image.pixelColor(x, y);
       if (std::abs(c.red() - 79) < 20 && std::abs(c.green() - 195) < 20 && std::abs(c.blue() - 247) < 20) ++blue;
-      if (std::abs(c.red() - 102) < 12 && std::abs(c.green() - 187) < 12 && std::abs(c.blue() - 106) < 12) {
-        ++tolerance_green;
-      }
+      if (c.green() > 120 && c.green() > c.red() + 40 && c.green() > c.blue() + 40) ++tolerance_green;
+      if (c.red() > 235 && c.green() > 235 && c.blue() > 235) ++white;
       if (c.red() > c.green() + 50 && c.red() > c.blue() + 50) ++lost_red;
     }
   }
-  EXPECT_GT(blue, 100);
+  EXPECT_GT(blue, 60);
+  EXPECT_GT(white, 60);  // the magnitudes' legend and points
   EXPECT_GT(lost_red, 1000);
   EXPECT_GT(tolerance_green, 50);
   auto* text = page_->findChild<QLabel*>("audit_detail_text");
