@@ -41,10 +41,27 @@ void CorrectionPlot::SetWindow(double seconds) {
 
 void CorrectionPlot::Clear() {
   samples_.clear();
+  whole_run_ = false;
+  update();
+}
+
+void CorrectionPlot::SetRun(const std::vector<std::pair<double, CouchCorrection>>& frames) {
+  samples_.clear();
+  whole_run_ = true;
+  for (const auto& [t, c] : frames) {
+    samples_.push_back({t,
+                        {c.lateral_mm, c.longitudinal_mm, c.vertical_mm, c.pitch_deg, c.roll_deg, c.yaw_deg},
+                        c.state,
+                        {c.translation_mm, c.rotation_deg}});
+  }
+  const double t0 = samples_.empty() ? 0 : samples_.front().t;
+  const double span = samples_.empty() ? 1 : samples_.back().t - t0;
+  window_s_ = std::max(1.0, span / 0.98);
   update();
 }
 
 void CorrectionPlot::Add(double timestamp_s, const CouchCorrection& c) {
+  if (whole_run_) Clear();
   // A replay that starts again (or a step back in time) starts a new plot.
   if (!samples_.empty() && timestamp_s < samples_.back().t) samples_.clear();
   samples_.push_back({timestamp_s,
@@ -60,7 +77,8 @@ void CorrectionPlot::paintEvent(QPaintEvent*) {
   painter.setRenderHint(QPainter::Antialiasing);
   painter.fillRect(rect(), QColor(30, 33, 40));
   // A little room right of the newest frame so its points are not cut.
-  const double t_end = (samples_.empty() ? 0 : samples_.back().t) + 0.02 * window_s_;
+  const double t_end = whole_run_ ? (samples_.empty() ? 0 : samples_.front().t) + window_s_
+                                  : (samples_.empty() ? 0 : samples_.back().t) + 0.02 * window_s_;
   const double gap = 8;
   const double half = (height() - gap - 18) / 2.0;  // 18 px of time labels at the bottom
   PaintPanel(&painter, QRectF(0, 0, width(), half), 0, tolerances_.translation_mm, "mm", t_end);
@@ -71,6 +89,18 @@ void CorrectionPlot::paintEvent(QPaintEvent*) {
   QFont font = painter.font();
   font.setPixelSize(11);
   painter.setFont(font);
+  if (whole_run_) {
+    // Seconds since the run's first frame, at a step that gives ~8 labels.
+    const double step = NiceCeil(window_s_ / 8);
+    for (double s = 0; s <= 0.98 * window_s_ + 1e-9; s += step) {
+      const double x = left + (right - left) * s / window_s_;
+      painter.drawText(QRectF(x - 30, height() - 16, 60, 14), Qt::AlignCenter, tr("%1 s").arg(s, 0, 'g', 4));
+    }
+    if (samples_.empty()) {
+      painter.drawText(rect(), Qt::AlignCenter, tr("this run stored no frames"));
+    }
+    return;
+  }
   const int step = window_s_ > 12 ? 5 : 2;
   for (int s = 0; s <= static_cast<int>(0.98 * window_s_); s += step) {
     const double x = right - (right - left) * (s + 0.02 * window_s_) / window_s_;
@@ -88,10 +118,16 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   const double left = 56, right = area.width() - 118;
   const QRectF plot(area.left() + left, area.top() + 4, right - left, area.height() - 8);
   const double t_begin = t_end - window_s_;
+  // The three axes, and on whole runs the magnitude (shift length, angle).
+  const int lines = whole_run_ ? 4 : 3;
+  auto value = [first_axis](const Sample& s, int k) {
+    return k < 3 ? s.values[first_axis + k] : s.magnitudes[first_axis / 3];
+  };
+  auto color_of = [](int k) { return k < 3 ? kAxisColors[k] : QColor(245, 245, 245); };
   double extent = 1.5 * tolerance;
   for (const Sample& s : samples_) {
     if (s.state == CorrectionState::kLost || s.t < t_begin) continue;
-    for (int a = first_axis; a < first_axis + 3; ++a) extent = std::max(extent, 1.1 * std::abs(s.values[a]));
+    for (int k = 0; k < lines; ++k) extent = std::max(extent, 1.1 * std::abs(value(s, k)));
   }
   extent = NiceCeil(extent);
   auto X = [&](double t) { return plot.left() + plot.width() * (t - t_begin) / window_s_; };
@@ -118,8 +154,8 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   painter->setPen(QPen(QColor(90, 96, 108), 1));
   painter->drawLine(QPointF(plot.left(), Y(0)), QPointF(plot.right(), Y(0)));
   // One line per axis, broken where a frame has no pose.
-  for (int a = first_axis; a < first_axis + 3; ++a) {
-    const QColor color = kAxisColors[a - first_axis];
+  for (int k = 0; k < lines; ++k) {
+    const QColor color = color_of(k);
     painter->setPen(QPen(color, 2));
     QPainterPath path;
     bool open = false;
@@ -128,7 +164,7 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
         open = false;
         continue;
       }
-      const QPointF p(X(s.t), Y(s.values[a]));
+      const QPointF p(X(s.t), Y(value(s, k)));
       if (open) {
         path.lineTo(p);
       } else {
@@ -139,7 +175,7 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
     painter->drawPath(path);
     painter->setBrush(color);
     for (const Sample& s : samples_) {
-      if (s.state != CorrectionState::kLost) painter->drawEllipse(QPointF(X(s.t), Y(s.values[a])), 2.5, 2.5);
+      if (s.state != CorrectionState::kLost) painter->drawEllipse(QPointF(X(s.t), Y(value(s, k))), 2.5, 2.5);
     }
     painter->setBrush(Qt::NoBrush);
   }
@@ -168,15 +204,16 @@ void CorrectionPlot::PaintPanel(QPainter* painter, const QRectF& area, int first
   painter->setPen(QColor(170, 176, 188));
   painter->drawText(QRectF(area.left() + 2, area.top() + area.height() / 2 - 7, 24, 14), Qt::AlignLeft, unit);
   // Legend at the right.
-  for (int a = first_axis; a < first_axis + 3; ++a) {
-    const double y = area.top() + 10 + (a - first_axis) * 16;
-    painter->setPen(QPen(kAxisColors[a - first_axis], 3));
+  for (int k = 0; k < lines; ++k) {
+    const double y = area.top() + 10 + k * 16;
+    painter->setPen(QPen(color_of(k), 3));
     painter->drawLine(QPointF(right + 8, y), QPointF(right + 24, y));
     painter->setPen(QColor(200, 204, 214));
-    painter->drawText(QRectF(right + 28, y - 7, 90, 14), Qt::AlignLeft | Qt::AlignVCenter, tr(kAxisNames[a]));
+    painter->drawText(QRectF(right + 28, y - 7, 90, 14), Qt::AlignLeft | Qt::AlignVCenter,
+                      k < 3 ? tr(kAxisNames[first_axis + k]) : (first_axis == 0 ? tr("|shift|") : tr("angle")));
   }
   painter->setPen(QPen(QColor(102, 187, 106), 1.2, Qt::DashLine));
-  const double y = area.top() + 10 + 3 * 16;
+  const double y = area.top() + 10 + lines * 16;
   painter->drawLine(QPointF(right + 8, y), QPointF(right + 24, y));
   painter->setPen(QColor(200, 204, 214));
   painter->drawText(QRectF(right + 28, y - 7, 90, 14), Qt::AlignLeft | Qt::AlignVCenter,

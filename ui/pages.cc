@@ -57,11 +57,20 @@ void AddQuad(TriangleMesh* mesh, const std::array<Eigen::Vector3d, 4>& corners) 
   mesh->faces.emplace_back(base, base + 2, base + 3);
 }
 
-// Colours each vertex of `surface` (room frame) by its distance to `model`
-// at `room_from_model`: green under 2 mm, through yellow (5 mm) to red at
-// 10 mm and beyond; grey past 30 mm (not the patient: couch, clothes).
-// Returns the colours and fills the share of vertices within 2 / 5 mm of
-// those within 30 mm.
+QPushButton* BrowseButton(QWidget* parent, QLineEdit* edit, bool folder) {
+  auto* button = new QPushButton(QObject::tr("Browse…"), parent);
+  QObject::connect(button, &QPushButton::clicked, parent, [parent, edit, folder] {
+    const QString path = folder ? QFileDialog::getExistingDirectory(parent, QObject::tr("Case folder"), edit->text())
+                                : QFileDialog::getSaveFileName(parent, QObject::tr("Session store"), edit->text(),
+                                                               QObject::tr("SQLite (*.db)"), nullptr,
+                                                               QFileDialog::DontConfirmOverwrite);
+    if (!path.isEmpty()) edit->setText(path);
+  });
+  return button;
+}
+
+}  // namespace
+
 std::vector<std::array<std::uint8_t, 3>> DistanceColours(const TriangleMesh& surface, const TriangleMesh& model,
                                                          const Rigid3d& room_from_model, double* within_2mm,
                                                          double* within_5mm, double* median_mm) {
@@ -91,20 +100,6 @@ std::vector<std::array<std::uint8_t, 3>> DistanceColours(const TriangleMesh& sur
   *median_mm = near.empty() ? 0 : near[near.size() / 2];
   return rgb;
 }
-
-QPushButton* BrowseButton(QWidget* parent, QLineEdit* edit, bool folder) {
-  auto* button = new QPushButton(QObject::tr("Browse…"), parent);
-  QObject::connect(button, &QPushButton::clicked, parent, [parent, edit, folder] {
-    const QString path = folder ? QFileDialog::getExistingDirectory(parent, QObject::tr("Case folder"), edit->text())
-                                : QFileDialog::getSaveFileName(parent, QObject::tr("Session store"), edit->text(),
-                                                               QObject::tr("SQLite (*.db)"), nullptr,
-                                                               QFileDialog::DontConfirmOverwrite);
-    if (!path.isEmpty()) edit->setText(path);
-  });
-  return button;
-}
-
-}  // namespace
 
 // ---------------------------------------------------------------- case
 
@@ -826,110 +821,6 @@ void SessionPage::RunSessionStage() {
   UpdateButtons();
 }
 
-// ---------------------------------------------------------------- audit
-
-AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
-  setTitle(tr("Audit"));
-  setSubTitle(tr("Who did what and when: the store's append-only, hash-chained audit log."));
-  verification_ = new QLabel(this);
-  verification_->setWordWrap(true);
-  table_ = new QTableWidget(this);
-  table_->setColumnCount(5);
-  table_->setHorizontalHeaderLabels({tr("Time (UTC)"), tr("Actor"), tr("Action"), tr("Entity"), tr("Details")});
-  table_->horizontalHeader()->setStretchLastSection(true);
-  table_->setEditTriggers(QAbstractItemView::NoEditTriggers);
-  auto* export_button = new QPushButton(tr("Export report…"), this);
-  connect(export_button, &QPushButton::clicked, this, &AuditPage::ExportReport);
-  auto* layout = new QVBoxLayout(this);
-  layout->addWidget(verification_);
-  layout->addWidget(table_, 1);
-  layout->addWidget(export_button, 0, Qt::AlignRight);
-}
-
-AuditVerification AuditPage::Verify() {
-  AuditVerification v;
-  if (auto* sqlite = dynamic_cast<SqliteDatabase*>(state_->database.get())) {
-    v = sqlite->VerifyAudit();
-  } else {
-    v.problems.push_back("this store cannot verify its audit log");
-  }
-  if (v.ok()) {
-    verification_->setText(tr("Audit log verified: %1 entries in the hash chain%2; the append-only triggers are "
-                              "in place; every plan, session, map, alignment and tracking run has its entry.")
-                               .arg(v.chained_entries)
-                               .arg(v.legacy_entries > 0
-                                        ? tr(" (%1 older entries from before the chain)").arg(v.legacy_entries)
-                                        : QString()));
-    verification_->setStyleSheet("QLabel { background-color: #2e7d32; color: white; padding: 8px; }");
-  } else {
-    verification_->setText(tr("Audit log NOT verified (%1 problem(s)): %2")
-                               .arg(v.problems.size())
-                               .arg(Q(v.problems.front())));
-    verification_->setStyleSheet("QLabel { background-color: #c62828; color: white; padding: 8px; }");
-  }
-  verification_->setToolTip(Q(v.ToText()));
-  return v;
-}
-
-void AuditPage::initializePage() {
-  table_->setRowCount(0);
-  verification_->clear();
-  if (!state_->database) return;
-  const std::int64_t first_bad_entry = Verify().first_bad_entry;
-  const auto entries = state_->database->ListAudit();
-  table_->setRowCount(static_cast<int>(entries.size()));
-  for (int row = 0; row < static_cast<int>(entries.size()); ++row) {
-    const auto& e = entries[row];
-    const QStringList cells = {Q(FormatUtcTime(e.time_unix_ms)), Q(e.actor), Q(e.action), Q(e.entity), Q(e.details)};
-    const bool bad = e.id.value() == first_bad_entry;
-    for (int c = 0; c < cells.size(); ++c) {
-      auto* item = new QTableWidgetItem(cells[c]);
-      item->setToolTip(cells[c]);  // the whole text where the column cuts it
-      if (bad) item->setBackground(QColor(255, 205, 205));
-      table_->setItem(row, c, item);
-    }
-    if (bad) table_->scrollToItem(table_->item(row, 0));
-  }
-  table_->resizeColumnsToContents();
-}
-
-void AuditPage::ExportReport() {
-  // The session report of `arpos report` (src/report), for the only session or one the user picks (newest first).
-  if (!state_->database) return;
-  const std::vector<SessionRecord> sessions = state_->database->ListSessions();
-  if (sessions.empty()) {
-    QMessageBox::information(this, tr("Export report"), tr("The store has no session to report."));
-    return;
-  }
-  QStringList items;
-  for (const SessionRecord& s : sessions) {
-    items << tr("Session %1: fraction %2, %3, started %4")
-                 .arg(s.id.value())
-                 .arg(s.fraction)
-                 .arg(ToString(s.status))
-                 .arg(Q(FormatUtcTime(s.started_unix_ms)));
-  }
-  int index = 0;
-  if (sessions.size() > 1) {
-    bool chosen = false;
-    const QString item = QInputDialog::getItem(this, tr("Export report"), tr("Session:"), items, 0, false, &chosen);
-    if (!chosen) return;
-    index = items.indexOf(item);
-  }
-  const SessionRecord& session = sessions[static_cast<std::size_t>(index)];
-  const QString path = QFileDialog::getSaveFileName(this, tr("Export report"),
-                                                    QString("arpos_report_session_%1.pdf").arg(session.id.value()),
-                                                    tr("PDF (*.pdf);;HTML (*.html)"));
-  if (path.isEmpty()) return;
-  try {
-    const std::optional<ReportFormat> format = ReportFormatForPath(path.toStdString());
-    if (!format) ARPOS_INPUT_ERROR("the report's file name must end in .html or .pdf: " << path.toStdString());
-    CheckReportOutputWritable(path.toStdString());
-    WriteSessionReport(GatherSessionReport(state_->database.get(), session.id, state_->options.store_path), *format,
-                       path.toStdString());
-  } catch (const std::exception& e) {
-    QMessageBox::critical(this, tr("Export report"), Q(e.what()));
-  }
-}
+// The audit page (AuditPage) is in ui/audit_page.cc.
 
 }  // namespace arpos::ui

@@ -2,6 +2,7 @@
 
 #include <QAbstractButton>
 #include <QApplication>
+#include <QLineEdit>
 #include <QMessageBox>
 #include <QSurfaceFormat>
 #include <QTimer>
@@ -10,6 +11,7 @@
 
 #include "exe/args.h"
 #include "store/store_path.h"
+#include "ui/pages.h"
 #include "ui/tracking_page.h"
 #include "ui/wizard.h"
 #include "util/check.h"
@@ -34,13 +36,17 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
       "  --fast              as fast as tracking goes (default: the recording's pace)\n"
       "  --pause-after N     pause by itself once N frames are tracked\n"
       "  --steps N           press Step N times, 1.5 s apart, from 2 s after opening\n"
+      "Audit page (--page 4):\n"
+      "  --select ENTITY     select the tree node of ENTITY (e.g. session:1, tracking_run:2)\n"
+      "  --filter TEXT       type TEXT into the audit table's search field\n"
+      "                      (either prints how many entries the table shows)\n"
       "For tests:\n"
       "  --close-after MS    close the window after MS ms, as its close button does\n"
       "  --answer-close A    answer a question the window asks on closing: yes or no\n"
       "                      (its text is printed)\n";
   const Args args(argv,
                   {"store", "case", "page", "screenshot", "screenshot-delay", "sequence", "pause-after",
-                   "close-after", "answer-close", "steps"},
+                   "close-after", "answer-close", "steps", "select", "filter"},
                   {"help", "play", "fast", "screenshot-when-done"});
   if (args.Has("help")) {
     std::cout << usage;
@@ -54,6 +60,9 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
                                 args.Has("pause-after") || args.Has("screenshot-when-done");
   if (tracking_options && page != ui::ArposWizard::kTrackingPage) {
     ARPOS_INPUT_ERROR("--play, --sequence, --fast, --steps, --pause-after and --screenshot-when-done need --page 3");
+  }
+  if ((args.Has("select") || args.Has("filter")) && page != ui::ArposWizard::kAuditPage) {
+    ARPOS_INPUT_ERROR("--select and --filter need --page 4");
   }
   if (args.Has("screenshot-when-done") && !args.Has("play")) ARPOS_INPUT_ERROR("--screenshot-when-done needs --play");
   const long long delay_ms = args.GetInt("screenshot-delay", 1500);
@@ -97,6 +106,21 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
   wizard.show();
   for (long long i = 0; i < page; ++i) wizard.next();
 
+  if (args.Has("select") || args.Has("filter")) {
+    auto* audit = qobject_cast<ui::AuditPage*>(wizard.page(ui::ArposWizard::kAuditPage));
+    ARPOS_CHECK(audit != nullptr, "the wizard has no audit page");
+    const std::string entity = args.GetOr("select", "");
+    if (!audit->SelectEntity(QString::fromStdString(entity))) {
+      ARPOS_INPUT_ERROR("--select " << entity << ": the audit page has no such node");
+    }
+    if (args.Has("filter")) {
+      if (auto* edit = audit->findChild<QLineEdit*>("audit_text_filter")) {
+        edit->setText(QString::fromStdString(args.GetOr("filter", "")));
+      }
+    }
+    std::cout << "arpos gui: audit shows " << audit->ShownEntries() << " of " << audit->TotalEntries()
+              << " entries" << std::endl;
+  }
   const auto screenshot = args.Get("screenshot");
   if (screenshot) {
     auto take = [&wizard, &app, path = *screenshot] {
