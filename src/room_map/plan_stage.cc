@@ -219,6 +219,14 @@ PlanRoomMapResult RunPlanRoomMap(const PlanRoomMapOptions& options, Database* da
         open_plans.push_back(p);
       }
     }
+    if (open_plans.size() > 1 && options.op.role == Role::kResearch) {
+      // A research run takes the newest (ListPlans is newest first) and says so.
+      result->plan_id = open_plans.front().id;
+      result->plan_choice = "plan " + std::to_string(result->plan_id.value()) + ", the newest of the patient's " +
+                            std::to_string(open_plans.size()) + " plans not yet approved (research run; --plan ID " +
+                            "chooses)";
+      return;
+    }
     if (open_plans.size() > 1) {
       std::string ids;
       for (const PlanSummary& p : open_plans) ids += (ids.empty() ? "" : ", ") + std::to_string(p.id.value());
