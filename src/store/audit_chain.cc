@@ -90,7 +90,7 @@ constexpr AuditedTable kAuditedTables[] = {
 
 }  // namespace
 
-std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash) {
+std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash, const std::string& row_hash) {
   std::string data = "arpos-audit-1\n";
   AppendField(&data, std::to_string(entry.id.value()));
   AppendField(&data, std::to_string(entry.time_unix_ms));
@@ -99,7 +99,67 @@ std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash
   AppendField(&data, entry.entity);
   AppendField(&data, entry.details);
   AppendField(&data, prev_hash);
+  if (!row_hash.empty()) AppendField(&data, row_hash);  // schema 8; earlier entries hash as before
   return Sha256Hex(data);
+}
+
+namespace {
+
+// Appends every column of every row `sql` (one id parameter) returns.
+bool AppendRows(sqlite3* db, const std::string& sql, std::int64_t id, std::string* data) {
+  sqlite3_stmt* statement = nullptr;
+  if (sqlite3_prepare_v2(db, sql.c_str(), -1, &statement, nullptr) != SQLITE_OK) {
+    sqlite3_finalize(statement);
+    return false;
+  }
+  sqlite3_bind_int64(statement, 1, id);
+  int rows = 0;
+  while (sqlite3_step(statement) == SQLITE_ROW) {
+    ++rows;
+    const int n = sqlite3_column_count(statement);
+    AppendField(data, "row " + std::to_string(n));
+    for (int c = 0; c < n; ++c) {
+      const int type = sqlite3_column_type(statement, c);
+      std::string value = std::to_string(type) + ":";
+      if (type == SQLITE_INTEGER) {
+        value += std::to_string(sqlite3_column_int64(statement, c));
+      } else if (type == SQLITE_FLOAT) {
+        value += StringPrintf("%.17g", sqlite3_column_double(statement, c));
+      } else if (type != SQLITE_NULL) {
+        const void* bytes = sqlite3_column_blob(statement, c);
+        const int size = sqlite3_column_bytes(statement, c);
+        if (bytes != nullptr && size > 0) value.append(static_cast<const char*>(bytes), static_cast<size_t>(size));
+      }
+      AppendField(data, value);
+    }
+  }
+  sqlite3_finalize(statement);
+  return rows > 0;
+}
+
+}  // namespace
+
+std::string AuditedRowHash(sqlite3* db, const std::string& entity) {
+  const size_t colon = entity.find(':');
+  if (colon == std::string::npos) return "";
+  long long id = 0;
+  if (!ParseInt(entity.substr(colon + 1), &id) || id <= 0) return "";
+  const std::string kind = entity.substr(0, colon);
+  for (const AuditedTable& t : kAuditedTables) {
+    if (kind != t.entity) continue;
+    std::string data = "arpos-row-1\n";
+    AppendField(&data, t.table);
+    if (!AppendRows(db, StringPrintf("SELECT * FROM %s WHERE %s = ?1", t.table, t.id_column), id, &data)) return "";
+    if (kind == "room_map") {
+      AppendRows(db, "SELECT * FROM room_map_markers WHERE room_map_id = ?1 ORDER BY marker_id", id, &data);
+    } else if (kind == "body_marker_map") {
+      AppendRows(db, "SELECT * FROM body_marker_poses WHERE body_marker_map_id = ?1 ORDER BY marker_id", id, &data);
+    } else if (kind == "tracking_run") {
+      AppendRows(db, "SELECT * FROM tracking_frames WHERE tracking_run_id = ?1 ORDER BY frame_index", id, &data);
+    }
+    return Sha256Hex(data);
+  }
+  return "";
 }
 
 std::string AuditVerification::ToText() const {
@@ -123,12 +183,15 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
   AuditVerification v;
   std::set<std::string> entities;
   std::set<std::string> entity_actions;  // "action entity"
+  std::map<std::string, std::pair<long long, std::string>> last_row_hash;  // entity -> (entry id, row hash)
+  bool has_row_hash = false;
 
   // The chain, in id order.
   {
-    SqliteStatement s(db,
-                      "SELECT audit_id, time_unix_ms, actor, action, entity, details, prev_hash, entry_hash "
-                      "FROM audit_log ORDER BY audit_id");
+    has_row_hash = QueryInt64(db, "SELECT COUNT(*) FROM pragma_table_info('audit_log') WHERE name = 'row_hash'") > 0;
+    SqliteStatement s(db, std::string("SELECT audit_id, time_unix_ms, actor, action, entity, details, prev_hash, "
+                                      "entry_hash, ") +
+                              (has_row_hash ? "row_hash" : "''") + " FROM audit_log ORDER BY audit_id");
     std::string previous_hash;
     bool chain_started = false;
     while (s.Step()) {
@@ -139,7 +202,8 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
       e.action = s.ColumnText(3);
       e.entity = s.ColumnText(4);
       e.details = s.ColumnText(5);
-      const std::string prev_hash = s.ColumnText(6), entry_hash = s.ColumnText(7);
+      const std::string prev_hash = s.ColumnText(6), entry_hash = s.ColumnText(7), row_hash = s.ColumnText(8);
+      if (!row_hash.empty()) last_row_hash[e.entity] = {e.id.value(), row_hash};
       ++v.entries;
       entities.insert(e.entity);
       entity_actions.insert(e.action + " " + e.entity);
@@ -154,7 +218,7 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
       } else if (prev_hash != previous_hash) {
         v.problems.push_back(where + ": its previous hash does not match the entry before it (an entry was "
                                      "removed, inserted or changed before it)");
-      } else if (AuditEntryHash(e, prev_hash) != entry_hash) {
+      } else if (AuditEntryHash(e, prev_hash, row_hash) != entry_hash) {
         v.problems.push_back(where + ": its content does not match its hash (changed after it was written)");
       } else {
         ++v.chained_entries;
@@ -219,6 +283,17 @@ AuditVerification VerifyAuditLog(sqlite3* db) {
                                           "the program",
                                           id, status.c_str(), action.c_str()));
       }
+    }
+  }
+  // Every row as the newest entry about it sealed it (schema 8).
+  for (const auto& [entity, sealed] : last_row_hash) {
+    const std::string now = AuditedRowHash(db, entity);
+    if (now.empty()) {
+      v.problems.push_back(StringPrintf("%s, sealed by audit entry %lld, is gone (removed outside the program)",
+                                        entity.c_str(), sealed.first));
+    } else if (now != sealed.second) {
+      v.problems.push_back(StringPrintf("%s differs from what audit entry %lld sealed (changed outside the program)",
+                                        entity.c_str(), sealed.first));
     }
   }
   // Every clinical row has the entry that created it.

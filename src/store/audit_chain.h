@@ -22,7 +22,15 @@ struct sqlite3;
 namespace arpos {
 
 /// Hex SHA-256 of `entry` (its id and time as stored) chained to `prev_hash`.
-std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash);
+/// `row_hash` (schema 8): the audited row's AuditedRowHash, covered by the
+/// entry's hash when not empty.
+std::string AuditEntryHash(const AuditEntry& entry, const std::string& prev_hash, const std::string& row_hash = "");
+
+/// Hex SHA-256 of the row `entity` names ("plan:3", "tracking_run:7", ... of
+/// the audited tables) with every column, and for a room map, body marker
+/// map or tracking run its markers, poses or frames; "" if `entity` names
+/// no audited row or the row does not exist.
+std::string AuditedRowHash(sqlite3* db, const std::string& entity);
 
 struct AuditVerification {
   int entries = 0;          ///< rows in audit_log
@@ -42,7 +50,8 @@ struct AuditVerification {
 /// maps, reconstructions, alignments, tracking runs) has the audit entry
 /// that created it; from schema 7 also that the triggers locking approved
 /// plans are there and every approved plan and ended session has the entry
-/// that approved or ended it. Reads only.
+/// that approved or ended it; from schema 8 that every row is as the newest
+/// entry about it sealed it (row_hash). Reads only.
 AuditVerification VerifyAuditLog(sqlite3* db);
 
 }  // namespace arpos

@@ -1031,9 +1031,11 @@ AuditId SqliteDatabase::AppendAudit(const AuditEntry& entry) {
                             "COALESCE((SELECT MAX(audit_id) FROM audit_log), 0)) + 1"));
   const std::string prev_hash =
       QueryText(db_, "SELECT COALESCE((SELECT entry_hash FROM audit_log ORDER BY audit_id DESC LIMIT 1), '')");
+  // The row the entry is about, sealed as it is now (schema 8).
+  const std::string row_hash = AuditedRowHash(db_, e.entity);
   SqliteStatementGuard s(
       Prepared("INSERT INTO audit_log (audit_id, time_unix_ms, actor, action, entity, details, prev_hash, "
-               "entry_hash) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)"));
+               "entry_hash, row_hash) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)"));
   s->BindId(1, e.id);
   s->BindInt64(2, e.time_unix_ms);
   s->BindText(3, e.actor);
@@ -1041,7 +1043,8 @@ AuditId SqliteDatabase::AppendAudit(const AuditEntry& entry) {
   s->BindText(5, e.entity);
   s->BindText(6, e.details);
   s->BindText(7, prev_hash);
-  s->BindText(8, AuditEntryHash(e, prev_hash));
+  s->BindText(8, AuditEntryHash(e, prev_hash, row_hash));
+  s->BindText(9, row_hash);
   s->Execute();
   transaction.Commit();
   return e.id;

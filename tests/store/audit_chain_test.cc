@@ -147,8 +147,8 @@ TEST(AuditChain, EachKindOfTamperingIsNamed) {
 }
 
 // Approvals and session ends are made by the audited controllers
-// (store/lifecycle.h); one made with sqlite3, or a dropped plan trigger, is
-// named.
+// (store/lifecycle.h); one made with sqlite3, any other edit of an audited
+// row, or a dropped plan trigger, is named.
 TEST(AuditChain, AnApprovalOrASessionEndWrittenPastTheProgramIsNamed) {
   TempDir dir;
   const fs::path path = dir.path() / "store.db";
@@ -185,6 +185,13 @@ TEST(AuditChain, AnApprovalOrASessionEndWrittenPastTheProgramIsNamed) {
       << v.ToText();
   EXPECT_NE(v.ToText().find("session 1 is marked completed but no complete_session entry"), std::string::npos)
       << v.ToText();
+
+  // Any other column of an audited row, edited with sqlite3: the row no
+  // longer matches what its newest entry sealed (schema 8).
+  const fs::path edited = CopyOf(path, "edited.db");
+  RawExec(edited, "UPDATE sessions SET operator_name = 'someone else' WHERE session_id = 1");
+  EXPECT_NE(Verify(edited).ToText().find("session:1 differs from what audit entry 4 sealed"), std::string::npos)
+      << Verify(edited).ToText();
 
   const fs::path unlocked = CopyOf(path, "unlocked.db");
   RawExec(unlocked, "DROP TRIGGER plans_approved_are_locked");

@@ -635,7 +635,7 @@ TEST(SqliteDatabase, AuditLogIsAppendOnly) {
             SQLITE_CONSTRAINT_TRIGGER);
   EXPECT_NE(message.find("append-only: DELETE refused"), std::string::npos) << message;
   EXPECT_EQ(
-      RawExec(*db, "INSERT OR REPLACE INTO audit_log VALUES (1, 0, 'x', 'y', '', '', '', '')", &message),
+      RawExec(*db, "INSERT OR REPLACE INTO audit_log VALUES (1, 0, 'x', 'y', '', '', '', '', '')", &message),
       SQLITE_CONSTRAINT_TRIGGER)
       << "REPLACE deletes the old row, which the trigger must refuse: " << message;
 
