@@ -207,12 +207,10 @@ ManualAlignmentResult AlignStoredReconstruction(Database* database, Reconstructi
   }
   const auto reconstruction = database->GetReconstruction(reconstruction_id);
   if (!reconstruction) ARPOS_INPUT_ERROR("reconstruction " << reconstruction_id.value() << " does not exist");
-  const SessionRecord session_record =
-      RequireOpenSession(database, reconstruction->session_id, "a manual alignment");
-  const SessionRecord* session = &session_record;
-  const auto plan = database->GetPlan(session->plan_id);
+  const SessionRecord session = RequireOpenSession(database, reconstruction->session_id, "a manual alignment");
+  const auto plan = database->GetPlan(session.plan_id);
   if (!plan || plan->reference_model.vertices.empty()) {
-    ARPOS_INPUT_ERROR("plan " << session->plan_id.value() << " has no reference model");
+    ARPOS_INPUT_ERROR("plan " << session.plan_id.value() << " has no reference model");
   }
   const auto fit = EstimateRigidTransform(model_points, reconstruction_points);
   if (!fit) ARPOS_INPUT_ERROR("manual alignment: the picked points lie on a line; pick spread-out points");

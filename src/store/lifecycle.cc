@@ -35,14 +35,18 @@ std::string ThisHostName() {
   return name;
 }
 
+namespace {
+std::string DescribeApproval(const std::string& by, const std::optional<std::int64_t>& unix_ms) {
+  return unix_ms ? "approved by " + by + " on " + FormatUtcTime(*unix_ms) : std::string("not approved");
+}
+}  // namespace
+
 std::string DescribeApproval(const PlanRecord& plan) {
-  if (!plan.approved()) return "not approved";
-  return "approved by " + plan.approved_by + " on " + FormatUtcTime(*plan.approved_unix_ms);
+  return DescribeApproval(plan.approved_by, plan.approved_unix_ms);
 }
 
 std::string DescribeApproval(const PlanSummary& plan) {
-  if (!plan.approved()) return "not approved";
-  return "approved by " + plan.approved_by + " on " + FormatUtcTime(*plan.approved_unix_ms);
+  return DescribeApproval(plan.approved_by, plan.approved_unix_ms);
 }
 
 PlanRecord ApprovePlan(Database* database, const Operator& op, PlanId plan_id, const std::string& note) {

@@ -75,12 +75,14 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
     }
     if (whose == "the store") sessions = database->ListSessions();
     std::vector<SessionRecord> usable;
+    std::map<std::int64_t, SessionPieces> usable_pieces;
     int closed = 0;
     for (const auto& s : sessions) {
       if (s.status != SessionStatus::kOpen) {
         ++closed;
-      } else if (PiecesOf(database, s.id)) {
+      } else if (const std::optional<SessionPieces> p = PiecesOf(database, s.id)) {
         usable.push_back(s);
+        usable_pieces.emplace(s.id.value(), *p);
       }
     }
     std::sort(usable.begin(), usable.end(), [](const SessionRecord& a, const SessionRecord& b) {
@@ -107,7 +109,7 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
                               << ": run `arpos session CASE` first");
     }
     chosen = usable.front().id;
-    pieces = PiecesOf(database, chosen);
+    pieces = usable_pieces.at(chosen.value());
     said = "session " + std::to_string(chosen.value()) +
            (others.empty() ? ", the only open session of " + whose
                            : ", the newest of the open sessions of " + whose + " (" + others +
