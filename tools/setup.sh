@@ -13,6 +13,7 @@ PACKAGES="build-essential cmake ninja-build ccache pkg-config git
   libpcl-dev libeigen3-dev libsqlite3-dev sqlite3 libssl-dev libassimp-dev libceres-dev
   libgtest-dev libgmock-dev libbenchmark-dev libyaml-cpp-dev
   libgdcm-dev libvtkgdcm-dev
+  libopenni2-dev libopenigtlink-dev openigtlink-examples
   xvfb xauth libgl1-mesa-dri"
 
 missing=""

@@ -9,12 +9,21 @@ namespace arpos {
 
 ReplaySource::ReplaySource(std::filesystem::path sequence_dir, CameraIntrinsics intrinsics,
                            ReplayOptions options)
-    : dir_(std::move(sequence_dir)), intrinsics_(intrinsics), options_(options) {}
+    : dir_(std::move(sequence_dir)),
+      intrinsics_(intrinsics),
+      options_(options),
+      sequence_(Sequence::OpenEveryColourFrame(dir_)) {}
 
-std::string ReplaySource::description() const { return "replay of " + dir_.string(); }
+std::string ReplaySource::description() const {
+  return "replay of " + dir_.string() + (options_.realtime ? " at the recorded rate" : "");
+}
+
+int ReplaySource::frame_count() const {
+  const int step = 1 + std::max(0, options_.frame_step);
+  return static_cast<int>((sequence_.size() + step - 1) / step);
+}
 
 void ReplaySource::OpenImpl() {
-  sequence_ = Sequence::Open(dir_);
   next_ = 0;
   start_wall_ = std::chrono::steady_clock::now();
   start_timestamp_s_ = sequence_.size() ? sequence_.timestamp_s(0) : 0;
@@ -27,13 +36,33 @@ bool ReplaySource::NextImpl(RgbdFrame* frame) {
     std::this_thread::sleep_until(start_wall_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                                     std::chrono::duration<double>(offset_s)));
   }
-  *frame = sequence_.LoadFrame(next_, intrinsics_);
+  const auto arrival = std::chrono::steady_clock::now();
+  std::string depth_problem;
+  try {
+    *frame = sequence_.LoadFrameColourFirst(next_, intrinsics_, &depth_problem);
+    frame->problem = depth_problem;
+  } catch (const InputError& e) {
+    *frame = RgbdFrame();
+    frame->index = static_cast<int>(next_);
+    frame->timestamp_s = sequence_.timestamp_s(next_);
+    frame->problem = e.what();
+  }
+  frame->arrival = arrival;
   next_ += 1 + std::max(0, options_.frame_step);
   return true;
 }
 
 std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& uri) {
-  const std::filesystem::path dir = std::filesystem::absolute(uri).lexically_normal();
+  std::string path = uri;
+  ReplayOptions options;
+  if (const size_t q = uri.rfind('?'); q != std::string::npos) {
+    const std::string query = uri.substr(q + 1);
+    if (query != "realtime") ARPOS_INPUT_ERROR("replay:" << uri << ": unknown option '" << query << "' (known: realtime)");
+    options.realtime = true;
+    path = uri.substr(0, q);
+  }
+  if (path.empty()) ARPOS_INPUT_ERROR("replay needs a sequence folder: replay:SEQUENCE_DIR");
+  const std::filesystem::path dir = std::filesystem::absolute(path).lexically_normal();
   if (!std::filesystem::is_directory(dir)) {
     ARPOS_INPUT_ERROR(dir.string() << ": sequence folder does not exist");
   }
@@ -41,7 +70,7 @@ std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& uri) {
   for (int up = 0; up < 3 && probe.has_parent_path(); ++up) {
     probe = probe.parent_path();
     if (std::filesystem::exists(probe / "case.yaml")) {
-      return std::make_unique<ReplaySource>(dir, LoadCaseConfig(probe / "case.yaml").camera);
+      return std::make_unique<ReplaySource>(dir, LoadCaseConfig(probe / "case.yaml").camera, options);
     }
   }
   ARPOS_INPUT_ERROR(dir.string() << ": no case.yaml found above this sequence folder");

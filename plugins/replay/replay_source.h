@@ -1,6 +1,9 @@
 #pragma once
 /// Plays a recorded TUM-layout sequence as if it were a live camera (after
 /// PLUS's SavedDataSource), so that every test runs without hardware.
+/// Every colour frame is delivered; a frame whose colour cannot be read comes
+/// with an empty image and RgbdFrame::problem saying why, one without usable
+/// depth with an empty depth image and the reason.
 
 #include <chrono>
 #include <memory>
@@ -21,10 +24,15 @@ struct ReplayOptions {
 
 class ReplaySource : public CameraSource {
  public:
+  /// Opens the sequence's index at once (throws InputError for a missing or
+  /// unreadable index), so that frame_count() is known before Open().
   ReplaySource(std::filesystem::path sequence_dir, CameraIntrinsics intrinsics,
                ReplayOptions options = {});
   const CameraIntrinsics& intrinsics() const override { return intrinsics_; }
   std::string description() const override;
+  int frame_count() const override;
+  bool live() const override { return options_.realtime; }
+  std::string recording_path() const override { return dir_.string(); }
 
  protected:
   void OpenImpl() override;
@@ -40,8 +48,9 @@ class ReplaySource : public CameraSource {
   double start_timestamp_s_ = 0;
 };
 
-/// Finds case.yaml in the sequence folder's parents (room/ -> case, tracking/x/
-/// -> case) and builds a ReplaySource. Throws InputError if there is none.
-std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& sequence_dir);
+/// "SEQUENCE_DIR" or "SEQUENCE_DIR?realtime". Finds case.yaml in the
+/// sequence folder's parents (room/ -> case, tracking/x/ -> case) and builds
+/// a ReplaySource. Throws InputError if there is none.
+std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& uri);
 
 }  // namespace arpos

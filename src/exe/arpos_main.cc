@@ -7,7 +7,6 @@
 
 #include "exe/args.h"
 #include "exe/commands.h"
-#include "plugins/builtin_sources.h"
 #include "util/check.h"
 #include "util/logging.h"
 
@@ -119,7 +118,6 @@ int main(int argc, char** argv) {
     std::cout << "arpos " << ARPOS_VERSION << "\n";
     return 0;
   }
-  arpos::RegisterBuiltinCameraSources();
   const std::string name = args.front();
   args.erase(args.begin());
   try {

@@ -32,10 +32,18 @@ CameraSourceRegistry& CameraSourceRegistry::Global() {
   return registry;
 }
 
-void CameraSourceRegistry::Register(const std::string& kind, const std::string& help,
-                                    Factory factory) {
+void CameraSourceRegistry::Register(const std::string& kind, const std::string& help, Factory factory,
+                                    Lister lister) {
   ARPOS_CHECK(!kind.empty() && factory, "a camera source needs a kind and a factory");
-  entries_[kind] = {help, std::move(factory)};
+  entries_[kind] = {help, std::move(factory), std::move(lister), ""};
+}
+
+void CameraSourceRegistry::Merge(CameraSourceRegistry&& other, const std::string& origin) {
+  for (auto& [name, entry] : other.entries_) {
+    entry.origin = origin;
+    entries_[name] = std::move(entry);
+  }
+  other.entries_.clear();
 }
 
 std::unique_ptr<CameraSource> CameraSourceRegistry::Create(const std::string& spec) const {
@@ -46,14 +54,16 @@ std::unique_ptr<CameraSource> CameraSourceRegistry::Create(const std::string& sp
   if (it == entries_.end()) {
     std::ostringstream known;
     for (const auto& [name, entry] : entries_) known << " " << name;
-    ARPOS_INPUT_ERROR("unknown camera source '" << kind << "'; known sources:" << known.str());
+    ARPOS_INPUT_ERROR("unknown camera source '" << kind << "'; known sources:"
+                      << (entries_.empty() ? std::string(" none (no plugin was loaded; see `arpos sources`)")
+                                           : known.str()));
   }
   return it->second.factory(uri);
 }
 
-std::vector<std::pair<std::string, std::string>> CameraSourceRegistry::Kinds() const {
-  std::vector<std::pair<std::string, std::string>> kinds;
-  for (const auto& [name, entry] : entries_) kinds.emplace_back(name, entry.help);
+std::vector<CameraSourceRegistry::Kind> CameraSourceRegistry::Kinds() const {
+  std::vector<Kind> kinds;
+  for (const auto& [name, entry] : entries_) kinds.push_back({name, entry.help, entry.origin, entry.lister});
   return kinds;
 }
 

@@ -3,9 +3,10 @@
 /// recorded sequence replayed as if live, the simulator).
 ///
 /// Public Open/Next/Close do the bookkeeping and call the protected hooks
-/// (after PLUS's vtkPlusDevice). Sources are registered by an explicit call
-/// (RegisterBuiltinCameraSources in plugins/), never by static initialisers.
-/// A source is used from one thread at a time.
+/// (after PLUS's vtkPlusDevice). Sources live in plugins (plugins/<name>/,
+/// shared libraries loaded at run time, sensor/source_plugin.h) and are
+/// registered by an explicit call of each plugin's entry, never by static
+/// initialisers. A source is used from one thread at a time.
 
 #include <functional>
 #include <map>
@@ -33,6 +34,13 @@ class CameraSource {
 
   virtual const CameraIntrinsics& intrinsics() const = 0;
   virtual std::string description() const = 0;
+  /// Frames in the stream when known in advance (a recording), else -1.
+  virtual int frame_count() const { return -1; }
+  /// True when frames come at the camera's pace whether or not they are
+  /// taken (a device, a paced simulation): a slow reader loses frames.
+  virtual bool live() const { return false; }
+  /// The recording folder behind the source, if any (for the store).
+  virtual std::string recording_path() const { return {}; }
 
  protected:
   virtual void OpenImpl() = 0;
@@ -44,21 +52,41 @@ class CameraSource {
   int frames_delivered_ = 0;
 };
 
+/// What a source kind can open right now (`arpos sources`): for a device
+/// kind the attached devices, for others what the URI names.
+struct SourceAvailability {
+  std::vector<std::string> devices;  ///< "URI  description" per openable device
+  std::string status;                ///< one line: "2 devices", "no device attached", ...
+};
+
 /// Factory by kind name, e.g. "replay" with a URI that is a sequence folder.
 class CameraSourceRegistry {
  public:
   using Factory = std::function<std::unique_ptr<CameraSource>(const std::string& uri)>;
+  using Lister = std::function<SourceAvailability()>;
   static CameraSourceRegistry& Global();
 
-  void Register(const std::string& kind, const std::string& help, Factory factory);
+  /// `lister` (optional) says what is available now; it must not throw for
+  /// an absent device.
+  void Register(const std::string& kind, const std::string& help, Factory factory, Lister lister = {});
+  /// Moves every kind of `other` in, noting `origin` (the plugin's file).
+  void Merge(CameraSourceRegistry&& other, const std::string& origin);
   /// "kind:uri" or a kind alone. Throws InputError listing the known kinds.
   std::unique_ptr<CameraSource> Create(const std::string& spec) const;
-  std::vector<std::pair<std::string, std::string>> Kinds() const;  ///< kind, help
+
+  struct Kind {
+    std::string name, help, origin;
+    Lister lister;
+  };
+  std::vector<Kind> Kinds() const;
+  bool Has(const std::string& kind) const { return entries_.count(kind) > 0; }
 
  private:
   struct Entry {
     std::string help;
     Factory factory;
+    Lister lister;
+    std::string origin;
   };
   std::map<std::string, Entry> entries_;
 };

@@ -1,6 +1,7 @@
 #pragma once
 /// One RGB-D frame as a camera source delivers it.
 
+#include <chrono>
 #include <opencv2/core.hpp>
 #include <string>
 
@@ -12,6 +13,13 @@ struct RgbdFrame {
   cv::Mat color;             ///< CV_8UC3, BGR
   cv::Mat depth;             ///< CV_16UC1, registered to colour, 0 = no reading
   double depth_scale = 1000; ///< depth units per metre
+  /// What is wrong with this frame, empty when it is whole: colour that
+  /// could not be read (then `color` is empty), depth missing or unreadable
+  /// (then `depth` is empty). A source reports such frames as data.
+  std::string problem;
+  /// When the frame reached the program (the source's capture thread, or
+  /// when a recording's file was read): where latency is counted from.
+  std::chrono::steady_clock::time_point arrival{};
 
   /// Depth in metres at pixel (u, v); 0 if there is no reading.
   double DepthM(int u, int v) const {
