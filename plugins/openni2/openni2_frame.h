@@ -59,12 +59,13 @@ RgbdFrame RgbdFrameFromOpenNi2(const OpenNi2Image& color, const OpenNi2Image& de
 /// In this project's convention (intrinsics.h: pixel centres at integers) a
 /// principal point exactly at the image centre would be (width - 1) / 2;
 /// OpenNI2 and the point clouds PCL records from such cameras use width / 2,
-/// half a pixel right and down of it (0.8 mm at 0.9 m for fx 525). We keep
-/// OpenNI2's convention so that our points equal the device's own. The
-/// result is nominal: devices report no distortion, so the distortion is
-/// zero, and a calibrated camera (case.yaml) is better.
+/// half a pixel right and down of it (0.86 mm along each axis at 0.9 m for
+/// fx 525). We keep OpenNI2's convention so that our points equal the
+/// device's own. The result is nominal: devices report no distortion, so the
+/// distortion is zero, and a calibrated camera (case.yaml) is better.
 /// Throws InputError if a field of view is not in (0, pi) (a device that
-/// reports none says 0) or a size is not positive.
+/// reports none says 0), or if the result is implausible
+/// (CameraIntrinsics::Validate, e.g. pixels far from square).
 CameraIntrinsics IntrinsicsFromOpenNi2FieldOfView(int width, int height, double horizontal_fov_rad,
                                                   double vertical_fov_rad, double depth_scale);
 
