@@ -122,12 +122,13 @@ OpenNi2Source::Runtime::Runtime() {
 OpenNi2Source::Runtime::~Runtime() { openni::OpenNI::shutdown(); }
 
 OpenNi2Source::OpenNi2Source(OpenNi2Options options)
-    : options_(std::move(options)), name_("openni2:" + options_.device_uri) {
+    : options_(std::move(options)),
+      name_(options_.device_uri.empty() ? "openni2" : "openni2:" + options_.device_uri) {
   const bool any = options_.device_uri.empty();
   if (any) {
     openni::Array<openni::DeviceInfo> devices;
     openni::OpenNI::enumerateDevices(&devices);
-    if (devices.getSize() == 0) ARPOS_INPUT_ERROR("openni2: no OpenNI2 device attached (" << kNotAllowedHint << ")");
+    if (devices.getSize() == 0) ARPOS_INPUT_ERROR(name_ << ": no OpenNI2 device attached (" << kNotAllowedHint << ")");
   }
   if (device_.open(any ? openni::ANY_DEVICE : options_.device_uri.c_str()) != openni::STATUS_OK) {
     ARPOS_INPUT_ERROR(name_ << ": cannot open " << (any ? "the attached OpenNI2 device" : "this OpenNI2 device") << " ("
@@ -142,7 +143,7 @@ OpenNi2Source::OpenNi2Source(OpenNi2Options options)
     if (stream.create(device_, sensor) != openni::STATUS_OK) {
       ARPOS_INPUT_ERROR(name_ << ": cannot create its " << what << " stream (" << OpenNiError() << ")");
     }
-    // A mirrored image would turn the geometry into its mirror image.
+    // Mirrored images flip x: every pose would be one of a mirror world.
     stream.setMirroringEnabled(false);
     if (stream.getMirroringEnabled()) ARPOS_INPUT_ERROR(name_ << ": its " << what << " stream cannot stop mirroring");
   }

@@ -66,7 +66,7 @@ class OpenNi2Source : public CameraSource {
     ~Runtime();
   } runtime_;
   OpenNi2Options options_;
-  std::string name_;  ///< "openni2:URI" for messages
+  std::string name_;  ///< "openni2:URI" (the device's, once open) or "openni2", for messages
   openni::Device device_;
   openni::VideoStream color_, depth_;
   CameraIntrinsics intrinsics_;
