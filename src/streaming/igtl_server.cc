@@ -213,6 +213,9 @@ void IgtlServer::Impl::CloseAll() {
 
 IgtlServer::IgtlServer(const IgtlServerOptions& options) : impl_(std::make_unique<Impl>()) {
   impl_->options = options;
+  // OpenIGTLink creates its object factory on first use, unguarded: do it
+  // here, on the constructing thread, before Send may run on another.
+  PackIgtlFrame(IgtlFrame{});
   try {
     impl_->Listen();
   } catch (...) {
@@ -253,17 +256,14 @@ bool IgtlServer::WaitForClient(double timeout_s) {
 
 void IgtlServer::Send(const IgtlFrame& frame) {
   const Clock::time_point start = Clock::now();
-  {
-    std::lock_guard<std::mutex> lock(impl_->mutex);
-    ++impl_->stats.frames;
-    if (impl_->live_clients == 0) return;
-  }
-  // Packed outside the lock; checks the timestamp before anything is sent.
+  // Packed outside the lock, with or without clients (tens of microseconds);
+  // checks the timestamp before anything is counted or sent.
   const IgtlPackedFrame packed = PackIgtlFrame(frame);
 
   bool dropped_any = false;
   {
     std::lock_guard<std::mutex> lock(impl_->mutex);
+    ++impl_->stats.frames;
     bool delivered = false;
     for (Impl::Client& client : impl_->clients) {
       if (client.dropped) continue;

@@ -63,7 +63,7 @@ class IgtlServer {
   /// Sends the frame's messages to every connected client; returns at once
   /// (see above: slow or gone clients are dropped, never waited for). With no
   /// client the frame is only counted. Throws arpos::Error for a negative or
-  /// non-finite timestamp, before anything is sent.
+  /// non-finite timestamp, before anything is counted or sent.
   void Send(const IgtlFrame& frame);
 
   struct Stats {

@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
@@ -173,6 +174,9 @@ TEST(IgtlServer, BadAddressOrPortIsAnInputError) {
 TEST(IgtlServer, SendWithoutClientsOnlyCounts) {
   IgtlServer server(AnyPort());
   server.Send(TestFrame(0));
+  IgtlFrame bad = TestFrame(1);
+  bad.timestamp_s = std::nan("");
+  EXPECT_THROW(server.Send(bad), Error);  // not counted
   const IgtlServer::Stats stats = server.stats();
   EXPECT_EQ(stats.frames, 1);
   EXPECT_EQ(stats.messages, 0);
