@@ -9,9 +9,11 @@
 /// - Send never waits for a client: every client socket is non-blocking, and
 ///   a client that cannot take a whole frame at once (it does not read, its
 ///   socket buffer is full) or whose connection failed is dropped and
-///   counted. A healthy client on a LAN holds `send_buffer_bytes` of backlog,
-///   seconds of frames (a frame is about 600 bytes); more than that would
-///   show a stale pose, so it is dropped instead, and may reconnect.
+///   counted. The buffers hold a few seconds of frames at 30 fps (a frame
+///   is about 800 bytes; with the default `send_buffer_bytes` a client that
+///   never reads goes after some 200 frames on Linux): a client further
+///   behind would show a stale pose, so it is dropped instead, and may
+///   reconnect.
 /// - Sockets are plain POSIX (IPv4, TCP_NODELAY, close-on-exec); OpenIGTLink
 ///   packs the messages. igtl::ServerSocket is not used: it always binds every
 ///   interface (INADDR_ANY) and its Send blocks.
