@@ -6,8 +6,8 @@
 ARPOS_SOURCE_PLUGIN_EXPORT int arpos_register_camera_sources(arpos::CameraSourceRegistry* registry) {
   registry->Register(
       "replay",
-      "replay:SEQUENCE_DIR[?realtime] plays a recorded sequence (DATASET.md layout) as if live; "
-      "intrinsics from the case.yaml above it; ?realtime paces frames at the recorded rate",
+      "replay:SEQUENCE_DIR[?realtime&case=DIR] plays a recorded sequence (DATASET.md layout); the camera "
+      "from the case.yaml above it (or in DIR); realtime: at the recorded rate, as a live camera",
       [](const std::string& uri) { return arpos::MakeReplaySourceFromUri(uri); },
       [] {
         arpos::SourceAvailability a;

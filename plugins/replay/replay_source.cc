@@ -1,5 +1,6 @@
 #include "plugins/replay/replay_source.h"
 
+#include <sstream>
 #include <thread>
 
 #include "sensor/case_config.h"
@@ -55,16 +56,29 @@ bool ReplaySource::NextImpl(RgbdFrame* frame) {
 std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& uri) {
   std::string path = uri;
   ReplayOptions options;
-  if (const size_t q = uri.rfind('?'); q != std::string::npos) {
-    const std::string query = uri.substr(q + 1);
-    if (query != "realtime") ARPOS_INPUT_ERROR("replay:" << uri << ": unknown option '" << query << "' (known: realtime)");
-    options.realtime = true;
+  std::filesystem::path case_dir;
+  if (const size_t q = uri.find('?'); q != std::string::npos) {
+    std::stringstream query(uri.substr(q + 1));
+    std::string item;
+    while (std::getline(query, item, '&')) {
+      if (item == "realtime") {
+        options.realtime = true;
+      } else if (item.rfind("case=", 0) == 0) {
+        case_dir = item.substr(5);
+      } else {
+        ARPOS_INPUT_ERROR("replay:" << uri << ": unknown option '" << item << "' (known: realtime, case=DIR)");
+      }
+    }
     path = uri.substr(0, q);
   }
   if (path.empty()) ARPOS_INPUT_ERROR("replay needs a sequence folder: replay:SEQUENCE_DIR");
   const std::filesystem::path dir = std::filesystem::absolute(path).lexically_normal();
   if (!std::filesystem::is_directory(dir)) {
     ARPOS_INPUT_ERROR(dir.string() << ": sequence folder does not exist");
+  }
+  if (!case_dir.empty()) {
+    if (!std::filesystem::exists(case_dir / "case.yaml")) ARPOS_INPUT_ERROR((case_dir / "case.yaml").string() << ": not found");
+    return std::make_unique<ReplaySource>(dir, LoadCaseConfig(case_dir / "case.yaml").camera, options);
   }
   std::filesystem::path probe = dir;
   for (int up = 0; up < 3 && probe.has_parent_path(); ++up) {

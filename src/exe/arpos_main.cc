@@ -66,6 +66,8 @@ const std::vector<Command>& Commands() {
 #ifdef ARPOS_HAVE_SIMULATE
       {"simulate", "write a synthetic case folder with exact ground truth", arpos::RunSimulateCommand},
 #endif
+      {"sources", "list the camera sources (plugins) and the devices attached", arpos::RunSourcesCommand},
+      {"record", "write a camera source as a sequence folder (DATASET.md)", arpos::RunRecordCommand},
       {"evaluate", "trajectory or couch-correction error against ground truth (MTE/MRE, lost, in while out)",
        arpos::RunEvaluateCommand},
 #ifdef ARPOS_HAVE_STORE

@@ -12,5 +12,7 @@ int RunCheckCommand(const std::vector<std::string>& args);
 int RunEvaluateCommand(const std::vector<std::string>& args);
 int RunRunCaseCommand(const std::vector<std::string>& args);
 int RunSessionCommand(const std::vector<std::string>& args);
+int RunSourcesCommand(const std::vector<std::string>& args);
+int RunRecordCommand(const std::vector<std::string>& args);
 
 }  // namespace arpos

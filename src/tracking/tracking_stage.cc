@@ -8,7 +8,9 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "features/response_from_recording.h"
+#include "sensor/frame_feed.h"
 #include "sensor/sequence.h"
+#include "sensor/source_plugin.h"
 #include "sensor/tum_io.h"
 #include "store/database.h"
 #include "store/lifecycle.h"
@@ -16,6 +18,7 @@
 #include "tracking/overlay.h"
 #include "util/check.h"
 #include "util/file.h"
+#include "util/logging.h"
 #include "util/string_util.h"
 
 namespace arpos {
@@ -196,10 +199,30 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
                                   << " m markers but case.yaml says " << config.room_markers.size_m << " m");
   }
   RequireOpenSession(database, inputs.session_id, "tracking");
-  const Sequence sequence = Sequence::OpenEveryColourFrame(options.sequence_dir);
+  std::unique_ptr<CameraSource> owned_source;
+  CameraSource* source = options.source;
+  if (!source) {
+    if (options.sequence_dir.empty()) ARPOS_INPUT_ERROR("tracking needs a sequence folder or a camera source");
+    std::string uri = "replay:" + std::filesystem::absolute(options.sequence_dir).string();
+    if (!options.case_dir.empty()) uri += "?case=" + std::filesystem::absolute(options.case_dir).string();
+    owned_source = SourceRegistry().Create(uri);
+    source = owned_source.get();
+  }
+  const std::string recording_path = source->recording_path();
   TrackSequenceResult result;
-  result.name = options.name.empty() ? std::filesystem::absolute(options.sequence_dir).lexically_normal().filename().string()
-                                     : options.name;
+  if (!options.name.empty()) {
+    result.name = options.name;
+  } else if (!options.sequence_dir.empty()) {
+    result.name = std::filesystem::absolute(options.sequence_dir).lexically_normal().filename().string();
+  } else {
+    ARPOS_INPUT_ERROR("a tracking run of a live source needs a name");
+  }
+  const CameraIntrinsics camera = source->intrinsics();
+  if (camera.width != config.camera.width || camera.height != config.camera.height) {
+    Log(LogLevel::kWarning, StringPrintf("the source's images are %dx%d, case.yaml says %dx%d: tracking uses the "
+                                         "source's camera",
+                                         camera.width, camera.height, config.camera.width, config.camera.height));
+  }
   const bool write_files = !options.out_dir.empty();
   if (options.overlay && !write_files) ARPOS_INPUT_ERROR("the overlay needs an output folder (--out)");
   if (write_files) {
@@ -212,18 +235,30 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   // the session to be marked aborted by the next command (store/lifecycle.h).
   const SessionActivityGuard activity(database, inputs.session_id, "arpos track " + result.name);
   TrackerOptions tracker_options = MakeTrackerOptions(config, inputs);
+  tracker_options.camera.detector.intrinsics = camera;
+  tracker_options.body.detector.intrinsics = camera;
   tracker_options.tolerances = options.tolerances;
   tracker_options.parallel = options.parallel;
   tracker_options.temporal_filter = options.temporal_filter;
-  const RecordingResponse response = EstimateRecordingResponse(sequence, config, inputs.room_map.camera_response);
+  RecordingResponse response;
+  if (!recording_path.empty()) {
+    response = EstimateRecordingResponse(Sequence::OpenEveryColourFrame(recording_path), config,
+                                         inputs.room_map.camera_response);
+  } else {
+    // A live stream cannot be sampled ahead: the planning recording's
+    // response, measured by the same camera (store it with the room map).
+    response.response = inputs.room_map.camera_response;
+    response.message = "camera response: the room map's (" + inputs.room_map.camera_response.name() +
+                       "); a live stream is not sampled ahead";
+  }
   result.response_message = response.message;
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;
-  Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target,
-                  config.camera, tracker_options, inputs.room_from_model_at_scan);
+  Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target, camera,
+                  tracker_options, inputs.room_from_model_at_scan);
   std::optional<OverlayRenderer> overlay;
-  if (options.overlay) overlay.emplace(inputs.model, config.camera);
+  if (options.overlay) overlay.emplace(inputs.model, camera);
 
   std::vector<StampedPose> poses, camera_poses;
   std::ostringstream corrections, timing;
@@ -234,43 +269,45 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   std::vector<TrackingFrameRecord> records;
   std::vector<double> totals;
   double last_t = -1;
-  result.sequence_frames = static_cast<int>(sequence.size());
-  for (size_t i = 0; i < sequence.size(); ++i) {
-    if (options.before_frame && !options.before_frame(i, sequence.size())) {
+  const int stream_frames = source->frame_count();
+  const size_t count = stream_frames > 0 ? static_cast<size_t>(stream_frames) : 0;
+  FrameFeed feed(source, options.on_capture);
+  for (size_t i = 0;; ++i) {
+    if (options.max_frames > 0 && static_cast<int>(i) >= options.max_frames) break;
+    if (options.before_frame && !options.before_frame(i, count)) {
       result.stopped = true;
       break;
     }
-    const double t = sequence.timestamp_s(i);
     const auto t_load = Clock::now();
+    RgbdFrame frame;
+    if (!feed.Take(&frame)) break;
+    const double t = frame.timestamp_s;
     std::string note;
     if (last_t >= 0 && t - last_t > options.max_frame_gap_s) {
       note = StringPrintf("%.3f s since the previous frame", t - last_t);
     }
     last_t = t;
-    RgbdFrame frame;
-    std::string depth_problem;
-    bool readable = true;
-    try {
-      frame = sequence.LoadFrameColourFirst(i, config.camera, &depth_problem);
-    } catch (const InputError& e) {
-      readable = false;
-      note += (note.empty() ? "" : "; ") + std::string(e.what());
-    }
+    const bool readable = !frame.color.empty();
+    const std::string depth_problem = readable ? frame.problem : "";
+    if (!readable) note += (note.empty() ? "" : "; ") + frame.problem;
     const double load_ms = MsSince(t_load);
     TrackedFrame tracked;
     double depth_ms = 0;
+    // Frame arrival (the source's capture, or the file read): from here to
+    // the correction is the latency.
+    const Clock::time_point arrival = frame.arrival == Clock::time_point{} ? Clock::now() : frame.arrival;
     if (readable) {
-      // Frame arrival: from here to the correction is the latency.
-      const auto arrival = Clock::now();
       if (!frame.depth.empty()) CorrectDepthImage(config.camera, depth_correction, &frame.depth);
       depth_ms = MsSince(arrival);
       tracked = tracker.Process(frame);
       tracked.timings.total_ms = MsSince(arrival);
+      if (options.on_result) options.on_result(tracked, arrival);
       if (!depth_problem.empty()) note += (note.empty() ? "" : "; ") + depth_problem;
     } else {
       tracked.index = static_cast<int>(i);
       tracked.timestamp_s = t;
       tracked.correction = LostCorrection();
+      if (options.on_result) options.on_result(tracked, arrival);
     }
     if (!tracked.message.empty()) note += (note.empty() ? "" : "; ") + tracked.message;
 
@@ -334,7 +371,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     if (options.on_frame) {
       TrackedFrameEvent event;
       event.index = i;
-      event.count = sequence.size();
+      event.count = count;
       event.tracked = &tracked;
       if (readable) event.colour = frame.color;
       event.has_depth = readable && !frame.depth.empty();
@@ -342,8 +379,11 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
       event.note = note;
       options.on_frame(event);
     }
-    if (options.progress) options.progress(i + 1, sequence.size());
+    if (options.progress) options.progress(i + 1, count);
   }
+  feed.Stop();
+  result.dropped = feed.dropped();
+  result.sequence_frames = stream_frames > 0 ? stream_frames : feed.captured();
   if (!totals.empty()) {
     double sum = 0;
     for (double v : totals) sum += v;
@@ -368,6 +408,13 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   }
   result.poses = poses;
 
+  // What the run tracked: the recording, else the live source (and where it
+  // was recorded, if it was).
+  const std::string run_recording =
+      !recording_path.empty()        ? std::filesystem::absolute(recording_path).lexically_normal().string()
+      : !options.record_dir.empty() ? std::filesystem::absolute(options.record_dir).lexically_normal().string()
+                                     : "live: " + source->description();
+  const std::string run_source = recording_path.empty() ? source->description() + (options.record_dir.empty() ? "" : ", recorded to " + run_recording) : run_recording;
   TrackingRunRecord run;
   run.session_id = inputs.session_id;
   run.alignment_id = inputs.alignment_id;
@@ -378,7 +425,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
       "sequence: %s\nout: %s\noverlay: %s\nparallel: %s\ntemporal_filter: %s\nuncertainty_sigmas: %g\n"
       "body_marker_map: %lld\n"
       "room_map: %lld\nresponse: %s\n",
-      std::filesystem::absolute(options.sequence_dir).lexically_normal().string().c_str(),
+      run_source.c_str(),
       write_files ? std::filesystem::absolute(options.out_dir).lexically_normal().string().c_str() : "(none)",
       options.overlay ? "true" : "false",
       options.parallel ? "true" : "false", options.temporal_filter ? "true" : "false",
@@ -394,9 +441,9 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
       rec.kind = RecordingKind::kTracking;
       rec.session_id = inputs.session_id;
       rec.name = result.name;
-      rec.path = std::filesystem::absolute(options.sequence_dir).lexically_normal().string();
-      rec.frame_count = static_cast<std::int64_t>(sequence.size());
-      rec.intrinsics = ToRecordingIntrinsics(config.camera);
+      rec.path = run_recording;
+      rec.frame_count = static_cast<std::int64_t>(result.sequence_frames);
+      rec.intrinsics = ToRecordingIntrinsics(camera);
       result.recording_id = database->AddRecording(rec);
     }
     run.recording_id = result.recording_id;

@@ -12,6 +12,7 @@
 /// on.
 
 #include <filesystem>
+#include <chrono>
 #include <functional>
 #include <map>
 #include <optional>
@@ -22,6 +23,7 @@
 #include "geometry/rigid3.h"
 #include "geometry/triangle_mesh.h"
 #include "room_map/room_map.h"
+#include "sensor/camera_source.h"
 #include "sensor/case_config.h"
 #include "sensor/tum_io.h"
 #include "store/records.h"
@@ -85,7 +87,25 @@ struct TrackedFrameEvent {
 };
 
 struct TrackSequenceOptions {
+  /// A recorded sequence, played by the replay plugin (with the camera of
+  /// `config`), unless `source` is given.
   std::filesystem::path sequence_dir;
+  /// The case whose case.yaml describes sequence_dir's camera (empty: the
+  /// nearest above sequence_dir).
+  std::filesystem::path case_dir;
+  /// A camera source to track instead (`arpos track --source`; not owned,
+  /// opened and closed here). A live source runs on a capture thread of its
+  /// own and frames that arrive while a frame is tracked are dropped and
+  /// counted (sensor/frame_feed.h). Its intrinsics are used for tracking.
+  CameraSource* source = nullptr;
+  /// Stop after this many frames (0: the whole stream).
+  int max_frames = 0;
+  /// Every frame the source delivers, tracked or dropped, on the capture
+  /// thread (the recorder). Must be quick.
+  std::function<void(const RgbdFrame&)> on_capture;
+  /// The recording the frames are written to (`--record`), stored as the
+  /// run's recording path for a source that is not a recording itself.
+  std::filesystem::path record_dir;
   /// The run's name (the tracking/<name> folder name); empty: the folder's name.
   std::string name;
   /// Output folder: poses.txt, camera_poses.txt, corrections.csv, timing.csv
@@ -113,6 +133,9 @@ struct TrackSequenceOptions {
   std::function<bool(size_t index, size_t count)> before_frame;
   /// Called on the tracking thread after each frame, before the next is read.
   std::function<void(const TrackedFrameEvent&)> on_frame;
+  /// Called as soon as a frame's correction is known, before its overlay and
+  /// files (streaming): the frame as tracked and when it arrived.
+  std::function<void(const TrackedFrame&, std::chrono::steady_clock::time_point arrival)> on_result;
 };
 
 struct TrackSequenceResult {
@@ -121,7 +144,8 @@ struct TrackSequenceResult {
   std::string name;
   /// Stopped by options.before_frame after `frames` of `sequence_frames`.
   bool stopped = false;
-  int sequence_frames = 0;
+  int sequence_frames = 0;  ///< frames in the stream (a live source: captured)
+  int dropped = 0;          ///< live source: frames that arrived while one was tracked
   int frames = 0, tracked = 0, carried = 0, lost = 0;
   int in_tolerance = 0, out_of_tolerance = 0;
   /// Frames lost while at least one mapped sticker was detected.
@@ -135,8 +159,9 @@ struct TrackSequenceResult {
   std::string Summary() const;
 };
 
-/// Tracks `options.sequence_dir` (a TUM-layout sequence with the case's
-/// camera `config`) against `inputs`, writes the files, stores the run.
+/// Tracks `options.source`, else `options.sequence_dir` (a TUM-layout
+/// sequence with the case's camera `config`), against `inputs`, writes the
+/// files, stores the run.
 /// Throws InputError for an unreadable sequence or an unwritable out_dir
 /// (before any work), StoreError when the store fails (files written).
 TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,

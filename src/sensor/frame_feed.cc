@@ -1,0 +1,82 @@
+#include "sensor/frame_feed.h"
+
+namespace arpos {
+
+FrameFeed::FrameFeed(CameraSource* source, std::function<void(const RgbdFrame&)> on_capture)
+    : source_(source), on_capture_(std::move(on_capture)) {
+  source_->Open();
+  live_ = source_->live();
+  if (live_) thread_ = std::thread([this] { Capture(); });
+}
+
+FrameFeed::~FrameFeed() { Stop(); }
+
+void FrameFeed::Capture() {
+  for (;;) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stop_) break;
+    }
+    RgbdFrame frame;
+    if (!source_->Next(&frame)) break;
+    if (on_capture_) on_capture_(frame);
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++captured_;
+    if (slot_) ++dropped_;
+    slot_ = std::move(frame);
+    ready_.notify_one();
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  ended_ = true;
+  ready_.notify_all();
+}
+
+bool FrameFeed::Take(RgbdFrame* frame) {
+  if (!live_) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stop_) return false;
+    }
+    if (!source_->Next(frame)) return false;
+    if (on_capture_) on_capture_(*frame);
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++captured_;
+    ++taken_;
+    return true;
+  }
+  std::unique_lock<std::mutex> lock(mutex_);
+  ready_.wait(lock, [&] { return slot_.has_value() || ended_ || stop_; });
+  if (stop_ || !slot_) return false;
+  *frame = std::move(*slot_);
+  slot_.reset();
+  ++taken_;
+  return true;
+}
+
+void FrameFeed::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (stop_ && !thread_.joinable()) return;
+    stop_ = true;
+    ready_.notify_all();
+  }
+  // A live source blocked in Next returns with its next frame (a frame
+  // interval at most), then the thread sees stop_.
+  if (thread_.joinable()) thread_.join();
+  source_->Close();
+}
+
+int FrameFeed::captured() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return captured_;
+}
+int FrameFeed::taken() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return taken_;
+}
+int FrameFeed::dropped() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return dropped_;
+}
+
+}  // namespace arpos

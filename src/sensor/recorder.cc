@@ -1,0 +1,163 @@
+#include "sensor/recorder.h"
+
+#include <algorithm>
+#include <opencv2/imgcodecs.hpp>
+
+#include "util/check.h"
+#include "util/file.h"
+#include "util/string_util.h"
+
+namespace arpos {
+
+std::string RecorderStats::Summary() const {
+  std::string s = StringPrintf("%d frames written (%d with depth) of %d captured; %d dropped (writer behind)", written,
+                               depth_written, pushed, dropped);
+  if (unusable) s += StringPrintf("; %d without colour not written", unusable);
+  if (write_failures) s += StringPrintf("; %d could not be written (%s)", write_failures, first_failure.c_str());
+  const double span = last_timestamp_s - first_timestamp_s;
+  if (pushed > 1 && span > 0) s += StringPrintf("; %.1f s recorded, %.1f fps captured", span, (pushed - 1) / span);
+  s += StringPrintf("; queue at most %d", max_queue);
+  return s;
+}
+
+SequenceRecorder::SequenceRecorder(const std::filesystem::path& out_dir, const RecorderOptions& options)
+    : out_dir_(out_dir), options_(options) {
+  std::error_code ec;
+  if (std::filesystem::exists(out_dir_, ec)) {
+    if (!std::filesystem::is_directory(out_dir_, ec) || !std::filesystem::is_empty(out_dir_, ec)) {
+      ARPOS_INPUT_ERROR(out_dir_.string() << ": exists and is not an empty folder; record into a new folder");
+    }
+  }
+  for (const char* sub : {"rgb", "depth"}) {
+    std::filesystem::create_directories(out_dir_ / sub, ec);
+    if (ec) ARPOS_INPUT_ERROR(out_dir_.string() << ": cannot create " << sub << "/ (" << ec.message() << ")");
+  }
+  const int threads = std::max(1, options_.writer_threads);
+  for (int i = 0; i < threads; ++i) writers_.emplace_back([this] { Write(); });
+}
+
+SequenceRecorder::~SequenceRecorder() {
+  try {
+    Finish();
+  } catch (...) {
+  }
+}
+
+void SequenceRecorder::Push(const RgbdFrame& frame) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (finishing_) return;
+  if (!started_) {
+    started_ = true;
+    start_ = std::chrono::steady_clock::now();
+    stats_.first_timestamp_s = frame.timestamp_s;
+  }
+  ++stats_.pushed;
+  stats_.last_timestamp_s = frame.timestamp_s;
+  if (frame.color.empty()) {
+    ++stats_.unusable;
+    return;
+  }
+  if (static_cast<int>(queue_.size()) >= std::max(1, options_.queue_frames)) {
+    ++stats_.dropped;
+    return;
+  }
+  queue_.push_back({frame.timestamp_s, frame.color, frame.depth, frame.depth_scale});
+  stats_.max_queue = std::max(stats_.max_queue, static_cast<int>(queue_.size()));
+  ready_.notify_one();
+}
+
+void SequenceRecorder::Write() {
+  const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, options_.png_compression};
+  for (;;) {
+    Item item;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      ready_.wait(lock, [&] { return !queue_.empty() || finishing_; });
+      if (queue_.empty()) return;
+      item = std::move(queue_.front());
+      queue_.pop_front();
+    }
+    const std::string name = StringPrintf("%.6f.png", item.timestamp_s);
+    bool colour_ok = false, depth_ok = false;
+    std::string failure;
+    try {
+      colour_ok = cv::imwrite((out_dir_ / "rgb" / name).string(), item.color, png);
+      if (!colour_ok) failure = (out_dir_ / "rgb" / name).string() + ": could not be written";
+      if (colour_ok && !item.depth.empty()) {
+        cv::Mat depth = item.depth;
+        if (options_.depth_scale > 0 && std::abs(item.depth_scale - options_.depth_scale) > 1e-9) {
+          item.depth.convertTo(depth, CV_16U, options_.depth_scale / item.depth_scale);
+        }
+        depth_ok = cv::imwrite((out_dir_ / "depth" / name).string(), depth, png);
+        if (!depth_ok) failure = (out_dir_ / "depth" / name).string() + ": could not be written";
+      }
+    } catch (const cv::Exception& e) {
+      failure = e.what();
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (colour_ok) {
+      ++stats_.written;
+      rgb_.push_back({item.timestamp_s, "rgb/" + name, 0});
+    }
+    if (depth_ok) {
+      ++stats_.depth_written;
+      depth_.push_back({item.timestamp_s, "depth/" + name, 0});
+    }
+    if (!failure.empty()) {
+      ++stats_.write_failures;
+      if (stats_.first_failure.empty()) stats_.first_failure = failure;
+    }
+  }
+}
+
+RecorderStats SequenceRecorder::Finish() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (finished_) return stats_;
+    finishing_ = true;
+    ready_.notify_all();
+  }
+  for (auto& t : writers_) t.join();
+  writers_.clear();
+  std::lock_guard<std::mutex> lock(mutex_);
+  finished_ = true;
+  const auto by_time = [](const ImageListEntry& a, const ImageListEntry& b) { return a.timestamp_s < b.timestamp_s; };
+  std::sort(rgb_.begin(), rgb_.end(), by_time);
+  std::sort(depth_.begin(), depth_.end(), by_time);
+  WriteImageList(out_dir_ / "rgb.txt", rgb_, "colour images (arpos record)");
+  WriteImageList(out_dir_ / "depth.txt", depth_, "depth images (arpos record)");
+  if (started_) stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  return stats_;
+}
+
+RecordingFolder PrepareRecordingFolder(const std::filesystem::path& sequence_dir, const CameraIntrinsics& camera,
+                                       const CaseConfig& markers_from) {
+  const std::filesystem::path dir = std::filesystem::absolute(sequence_dir).lexically_normal();
+  RecordingFolder folder;
+  folder.case_dir = dir.parent_path().filename() == "tracking" ? dir.parent_path().parent_path() : dir.parent_path();
+  const std::filesystem::path yaml = folder.case_dir / "case.yaml";
+  if (std::filesystem::exists(yaml)) {
+    const CaseConfig config = LoadCaseConfig(yaml);
+    if (config.camera.width != camera.width || config.camera.height != camera.height) {
+      ARPOS_INPUT_ERROR(yaml.string() << ": its camera is " << config.camera.width << "x" << config.camera.height
+                                      << " but the source gives " << camera.width << "x" << camera.height
+                                      << " images; record into another case folder");
+    }
+    folder.depth_scale = config.camera.depth_scale;
+    return folder;
+  }
+  CaseConfig config = markers_from;
+  config.camera = camera;
+  const std::string problem = ValidateCaseConfig(config);
+  if (!problem.empty()) ARPOS_INPUT_ERROR("the source's camera cannot describe a case: " << problem);
+  std::error_code ec;
+  std::filesystem::create_directories(folder.case_dir, ec);
+  if (ec) ARPOS_INPUT_ERROR(folder.case_dir.string() << ": cannot create the case folder (" << ec.message() << ")");
+  SaveCaseConfig(config, yaml);
+  folder.depth_scale = camera.depth_scale;
+  folder.note = "wrote " + yaml.string() + " with the source's camera and the markers of DATASET.md's example (" +
+                config.dictionary + "); edit it if your printed markers differ";
+  return folder;
+}
+
+}  // namespace arpos

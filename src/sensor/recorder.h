@@ -1,0 +1,101 @@
+#pragma once
+/// Writes frames from any camera source as a sequence folder in the
+/// DATASET.md layout (rgb/, depth/, rgb.txt, depth.txt), so that a live
+/// session can be replayed and audited.
+///
+/// Push() never blocks the capture thread: frames wait in a bounded queue for
+/// the writer threads that encode the PNGs; when the queue is full the frame
+/// is dropped and counted. Finish() writes the two lists (only frames whose
+/// files were written) and reports what happened.
+
+#include <condition_variable>
+#include <deque>
+#include <filesystem>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "sensor/case_config.h"
+#include "sensor/rgbd_frame.h"
+#include "sensor/tum_io.h"
+
+namespace arpos {
+
+struct RecorderOptions {
+  /// Frames waiting to be written at most (about 1.5 MB each at 640x480).
+  int queue_frames = 90;
+  int writer_threads = 1;
+  int png_compression = 1;  ///< cv::IMWRITE_PNG_COMPRESSION; 1 is fast
+  /// Depth PNG units per metre of the folder's case (case.yaml); frames of
+  /// another scale are converted. 0: keep each frame's own.
+  double depth_scale = 0;
+};
+
+struct RecorderStats {
+  int pushed = 0;       ///< frames offered
+  int written = 0;      ///< colour images written (a frame without depth has no depth file)
+  int depth_written = 0;
+  int dropped = 0;      ///< the queue was full
+  int unusable = 0;     ///< no colour (the source said why); not written
+  int write_failures = 0;
+  int max_queue = 0;    ///< deepest the queue got
+  double seconds = 0;   ///< from the first push to the end of Finish
+  double first_timestamp_s = 0, last_timestamp_s = 0;
+  std::string first_failure;  ///< what the first failed write said
+  std::string Summary() const;
+};
+
+class SequenceRecorder {
+ public:
+  /// `out_dir` must not exist or be an empty folder; it is created with
+  /// rgb/ and depth/. Throws InputError naming the folder otherwise.
+  SequenceRecorder(const std::filesystem::path& out_dir, const RecorderOptions& options = {});
+  ~SequenceRecorder();  ///< finishes if Finish was not called
+  SequenceRecorder(const SequenceRecorder&) = delete;
+  SequenceRecorder& operator=(const SequenceRecorder&) = delete;
+
+  /// Queues a copy of the frame's images (shared, not copied: the caller
+  /// must not write into them afterwards). Thread-safe, never blocks.
+  void Push(const RgbdFrame& frame);
+  /// Writes what is queued, the lists, and returns the figures. Throws
+  /// InputError if the lists cannot be written.
+  RecorderStats Finish();
+  const std::filesystem::path& out_dir() const { return out_dir_; }
+
+ private:
+  struct Item {
+    double timestamp_s;
+    cv::Mat color, depth;
+    double depth_scale;
+  };
+  void Write();
+
+  std::filesystem::path out_dir_;
+  RecorderOptions options_;
+  std::mutex mutex_;
+  std::condition_variable ready_;
+  std::deque<Item> queue_;
+  bool finishing_ = false, finished_ = false;
+  RecorderStats stats_;
+  std::vector<ImageListEntry> rgb_, depth_;
+  std::vector<std::thread> writers_;
+  std::chrono::steady_clock::time_point start_;
+  bool started_ = false;
+};
+
+/// Where a recording into `sequence_dir` belongs (DATASET.md): the case
+/// folder is the grandparent for tracking/<name>, else the parent. With a
+/// case.yaml there, the camera must have its image size (InputError naming
+/// both otherwise) and depth is written in its units. Without one, a
+/// case.yaml is written with `camera` and the markers of `markers_from`,
+/// and `note` says so.
+struct RecordingFolder {
+  std::filesystem::path case_dir;
+  double depth_scale = 1000;
+  std::string note;
+};
+RecordingFolder PrepareRecordingFolder(const std::filesystem::path& sequence_dir, const CameraIntrinsics& camera,
+                                       const CaseConfig& markers_from);
+
+}  // namespace arpos
