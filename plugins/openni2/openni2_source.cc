@@ -85,30 +85,15 @@ OpenNi2Image ImageOf(const openni::VideoFrameRef& frame) {
 
 OpenNi2Options ParseOpenNi2Uri(const std::string& uri) {
   OpenNi2Options options;
-  const size_t q = uri.rfind('?');
-  options.device_uri = uri.substr(0, q);
-  if (q == std::string::npos) return options;
-  std::stringstream query(uri.substr(q + 1));
-  std::string item;
-  while (std::getline(query, item, '&')) {
-    const size_t eq = item.find('=');
-    const std::string key = item.substr(0, eq);
-    const std::string value = eq == std::string::npos ? "" : item.substr(eq + 1);
+  const SourceUri parsed = ParseSourceUri(uri);
+  options.device_uri = parsed.path;
+  for (const auto& [key, value] : parsed.options) {
     int* target = key == "width" ? &options.width : key == "height" ? &options.height : key == "fps" ? &options.fps : nullptr;
     if (target == nullptr) {
       ARPOS_INPUT_ERROR("openni2:" << uri << ": unknown option '" << key << "' (known: width, height, fps)");
     }
-    size_t used = 0;
-    int number = 0;
-    try {
-      number = std::stoi(value, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != value.size() || number <= 0) {
-      ARPOS_INPUT_ERROR("openni2:" << uri << ": " << key << " must be a positive whole number, got '" << value << "'");
-    }
-    *target = number;
+    *target = SourceUriInt("openni2:" + uri, key, value);
+    if (*target <= 0) ARPOS_INPUT_ERROR("openni2:" << uri << ": " << key << " must be positive, got '" << value << "'");
   }
   return options;
 }

@@ -1,6 +1,5 @@
 #include "plugins/replay/replay_source.h"
 
-#include <sstream>
 #include <thread>
 
 #include "sensor/case_config.h"
@@ -37,7 +36,6 @@ bool ReplaySource::NextImpl(RgbdFrame* frame) {
     std::this_thread::sleep_until(start_wall_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                                     std::chrono::duration<double>(offset_s)));
   }
-  const auto arrival = std::chrono::steady_clock::now();
   std::string depth_problem;
   try {
     *frame = sequence_.LoadFrameColourFirst(next_, intrinsics_, &depth_problem);
@@ -48,28 +46,26 @@ bool ReplaySource::NextImpl(RgbdFrame* frame) {
     frame->timestamp_s = sequence_.timestamp_s(next_);
     frame->problem = e.what();
   }
-  frame->arrival = arrival;
+  // Arrival: once the frame is in memory (reading the files is not part of
+  // the latency, timing.csv's load_ms).
+  frame->arrival = std::chrono::steady_clock::now();
   next_ += 1 + std::max(0, options_.frame_step);
   return true;
 }
 
 std::unique_ptr<CameraSource> MakeReplaySourceFromUri(const std::string& uri) {
-  std::string path = uri;
+  const SourceUri parsed = ParseSourceUri(uri);
+  const std::string& path = parsed.path;
   ReplayOptions options;
   std::filesystem::path case_dir;
-  if (const size_t q = uri.find('?'); q != std::string::npos) {
-    std::stringstream query(uri.substr(q + 1));
-    std::string item;
-    while (std::getline(query, item, '&')) {
-      if (item == "realtime") {
-        options.realtime = true;
-      } else if (item.rfind("case=", 0) == 0) {
-        case_dir = item.substr(5);
-      } else {
-        ARPOS_INPUT_ERROR("replay:" << uri << ": unknown option '" << item << "' (known: realtime, case=DIR)");
-      }
+  for (const auto& [key, value] : parsed.options) {
+    if (key == "realtime" && value.empty()) {
+      options.realtime = true;
+    } else if (key == "case" && !value.empty()) {
+      case_dir = value;
+    } else {
+      ARPOS_INPUT_ERROR("replay:" << uri << ": unknown option '" << key << "' (known: realtime, case=DIR)");
     }
-    path = uri.substr(0, q);
   }
   if (path.empty()) ARPOS_INPUT_ERROR("replay needs a sequence folder: replay:SEQUENCE_DIR");
   const std::filesystem::path dir = std::filesystem::absolute(path).lexically_normal();

@@ -38,31 +38,19 @@ sim::SimulationOptions OptionsOf(const sim::SimulationTruth& truth) {
   return options;
 }
 
-int IntValue(const std::string& key, const std::string& value) {
-  char* end = nullptr;
-  const long v = std::strtol(value.c_str(), &end, 10);
-  if (value.empty() || *end != '\0') ARPOS_INPUT_ERROR("sim: " << key << "=" << value << " is not a whole number");
-  return static_cast<int>(v);
-}
 
 }  // namespace
 
 SimulatorSourceOptions ParseSimulatorSourceUri(const std::string& uri) {
   SimulatorSourceOptions options;
-  const size_t q = uri.find('?');
-  options.case_dir = uri.substr(0, q);
+  const SourceUri parsed = ParseSourceUri(uri);
+  options.case_dir = parsed.path;
   if (options.case_dir.empty()) ARPOS_INPUT_ERROR("sim needs a simulated case folder: sim:CASE_DIR[?seq=N&frames=F&fps=R]");
-  if (q == std::string::npos) return options;
-  std::stringstream query(uri.substr(q + 1));
-  std::string item;
-  while (std::getline(query, item, '&')) {
-    const size_t eq = item.find('=');
-    const std::string key = item.substr(0, eq);
-    const std::string value = eq == std::string::npos ? "" : item.substr(eq + 1);
+  for (const auto& [key, value] : parsed.options) {
     if (key == "seq") {
-      options.sequence = IntValue(key, value);
+      options.sequence = SourceUriInt("sim", key, value);
     } else if (key == "frames") {
-      options.frames = IntValue(key, value);
+      options.frames = SourceUriInt("sim", key, value);
       if (options.frames < 1 || options.frames > 100000) ARPOS_INPUT_ERROR("sim: frames=" << value << " must be 1..100000");
     } else if (key == "fps") {
       char* end = nullptr;

@@ -27,6 +27,35 @@ void CameraSource::Close() {
   open_ = false;
 }
 
+SourceUri ParseSourceUri(const std::string& uri) {
+  SourceUri parsed;
+  const size_t q = uri.find('?');
+  parsed.path = uri.substr(0, q);
+  if (q == std::string::npos) return parsed;
+  std::stringstream query(uri.substr(q + 1));
+  std::string item;
+  while (std::getline(query, item, '&')) {
+    if (item.empty()) continue;
+    const size_t eq = item.find('=');
+    parsed.options.emplace_back(item.substr(0, eq), eq == std::string::npos ? "" : item.substr(eq + 1));
+  }
+  return parsed;
+}
+
+int SourceUriInt(const std::string& kind, const std::string& key, const std::string& value) {
+  size_t used = 0;
+  int number = 0;
+  try {
+    number = std::stoi(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != value.size()) {
+    ARPOS_INPUT_ERROR(kind << ": " << key << " must be a whole number, got '" << value << "'");
+  }
+  return number;
+}
+
 CameraSourceRegistry& CameraSourceRegistry::Global() {
   static CameraSourceRegistry registry;
   return registry;

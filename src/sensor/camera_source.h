@@ -52,6 +52,15 @@ class CameraSource {
   int frames_delivered_ = 0;
 };
 
+/// A source's URI as the plugins spell it: "PATH?key=value&flag&...".
+struct SourceUri {
+  std::string path;  ///< before the '?'
+  std::vector<std::pair<std::string, std::string>> options;  ///< in order; a flag has an empty value
+};
+SourceUri ParseSourceUri(const std::string& uri);
+/// `value` as a whole number; InputError naming `kind`, `key` and the text otherwise.
+int SourceUriInt(const std::string& kind, const std::string& key, const std::string& value);
+
 /// What a source kind can open right now (`arpos sources`): for a device
 /// kind the attached devices, for others what the URI names.
 struct SourceAvailability {

@@ -84,9 +84,12 @@ void SequenceRecorder::Write() {
       colour_ok = cv::imwrite((out_dir_ / "rgb" / name).string(), item.color, png);
       if (!colour_ok) failure = (out_dir_ / "rgb" / name).string() + ": could not be written";
       if (colour_ok && !item.depth.empty()) {
-        cv::Mat depth = item.depth;
+        // Converted into a new image: the frame's own is shared with the caller.
+        cv::Mat depth;
         if (options_.depth_scale > 0 && std::abs(item.depth_scale - options_.depth_scale) > 1e-9) {
           item.depth.convertTo(depth, CV_16U, options_.depth_scale / item.depth_scale);
+        } else {
+          depth = item.depth;
         }
         depth_ok = cv::imwrite((out_dir_ / "depth" / name).string(), depth, png);
         if (!depth_ok) failure = (out_dir_ / "depth" / name).string() + ": could not be written";

@@ -333,8 +333,8 @@ TEST(Openni2Plugin, WithNoCameraItListsNoneAndSaysSoWhenOpened) {
   EXPECT_NE(named.find("is it plugged in, and is the user allowed to use it?"), std::string::npos) << named;
 
   EXPECT_EQ(plugin.OpenError("openni2:?width=wide"),
-            "openni2:?width=wide: width must be a positive whole number, got 'wide'");
-  EXPECT_EQ(plugin.OpenError("openni2:?fps=0"), "openni2:?fps=0: fps must be a positive whole number, got '0'");
+            "openni2:?width=wide: width must be a whole number, got 'wide'");
+  EXPECT_EQ(plugin.OpenError("openni2:?fps=0"), "openni2:?fps=0: fps must be positive, got '0'");
   EXPECT_EQ(plugin.OpenError("openni2:?exposure=3"),
             "openni2:?exposure=3: unknown option 'exposure' (known: width, height, fps)");
 }

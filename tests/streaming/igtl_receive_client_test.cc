@@ -24,6 +24,7 @@
 
 #include <gtest/gtest.h>
 
+#include "sensor/tum_io.h"
 #include "streaming/igtl_server.h"
 #include "streaming/igtl_test_client.h"
 #include "util/string_util.h"
@@ -226,6 +227,85 @@ TEST(IgtlReceiveClient, PrintsEveryFrameWeSent) {
     EXPECT_EQ(text.text, IgtlCorrectionText(frame.correction));
   }
 }
+
+
+#ifdef ARPOS_EXECUTABLE
+// A port nobody listens on now (bound and released).
+int FreePort() {
+  IgtlServerOptions options;
+  options.port = 0;
+  IgtlServer probe(options);
+  return probe.port();
+}
+
+// The whole live path as a clinic would run it: `arpos track --source sim:`
+// (the simulator as a live camera at 30 fps) streaming to OpenIGTLink's
+// example client in its own process; every ModelToRoom and CameraToRoom the
+// client printed is the pose arpos wrote to poses.txt / camera_poses.txt for
+// that frame, in millimetres, and every frame has its STATUS.
+TEST(IgtlReceiveClient, LiveTrackingStreamsThePosesOfPosesTxt) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    StringPrintf("arpos_live_igtl_%d", static_cast<int>(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  const std::string sample = std::string(ARPOS_SAMPLE_SESSIONS_DIR) + "/demo_xtion";
+  const std::string store = (dir / "store.db").string();
+  {
+    ChildProcess run_case({ARPOS_EXECUTABLE, "run-case", sample, "--store", store, "--keep-open"},
+                          (dir / "run_case.log").string());
+    ASSERT_TRUE(run_case.WaitForExit(300)) << ReadFile((dir / "run_case.log").string());
+  }
+  const int port = FreePort();
+  const std::string track_log = (dir / "track.log").string();
+  ChildProcess track({ARPOS_EXECUTABLE, "track", "--source", "sim:" + sample + "?frames=30&fps=30", "--case", sample,
+                      "--store", store, "--out", (dir / "out").string(), "--igtl-port", std::to_string(port),
+                      "--igtl-wait"},
+                     track_log);
+  // Connect once arpos listens (it renders the frames after a client came).
+  const auto deadline = Clock::now() + std::chrono::seconds(120);
+  while (Count(ReadFile(track_log), "OpenIGTLink: listening") == 0 && Clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_GT(Count(ReadFile(track_log), "OpenIGTLink: listening"), 0) << ReadFile(track_log);
+  const std::string client_log = (dir / "client.log").string();
+  ChildProcess client({IGTL_RECEIVE_CLIENT, "127.0.0.1", std::to_string(port)}, client_log);
+  ASSERT_TRUE(track.WaitForExit(300)) << ReadFile(track_log);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // the client prints what is in flight
+  const std::string track_text = ReadFile(track_log);
+  EXPECT_NE(track_text.find("OpenIGTLink: client connected"), std::string::npos) << track_text;
+  EXPECT_NE(track_text.find("live: 30 frames captured"), std::string::npos) << track_text;
+
+  const std::vector<Printed> printed = ParseClientOutput(ReadFile(client_log));
+  const std::vector<StampedPose> poses = ReadTrajectory(dir / "out" / "poses.txt");
+  const std::vector<StampedPose> camera_poses = ReadTrajectory(dir / "out" / "camera_poses.txt");
+  ASSERT_FALSE(poses.empty()) << track_text;
+  const auto printed_at = [&](double t, const Rigid3d& pose) {
+    for (const Printed& p : printed) {
+      // poses.txt has 6 decimals; the header's time stamp is within 1e-7 s.
+      if (p.type == "TRANSFORM" && std::abs(p.timestamp_s - t) < 2e-6) {
+        // poses.txt rounds to 1e-6 m and 1e-9 of a quaternion: 0.01 mm.
+        Eigen::Matrix4d sent = testing::MatrixMm(pose);
+        bool match = true;
+        for (int r = 0; r < 3 && match; ++r) {
+          for (int c = 0; c < 4 && match; ++c) {
+            match = std::abs(p.matrix(r, c) - sent(r, c)) < (c == 3 ? 0.01 + 1e-5 * std::abs(sent(r, c)) : 2e-5);
+          }
+        }
+        if (match) return true;
+      }
+    }
+    return false;
+  };
+  for (const StampedPose& p : poses) EXPECT_TRUE(printed_at(p.timestamp_s, p.room_from_x)) << "ModelToRoom at " << p.timestamp_s;
+  for (const StampedPose& p : camera_poses) {
+    EXPECT_TRUE(printed_at(p.timestamp_s, p.room_from_x)) << "CameraToRoom at " << p.timestamp_s;
+  }
+  int statuses = 0;
+  for (const Printed& p : printed) statuses += p.type == "STATUS";
+  EXPECT_EQ(statuses, 30);
+  std::filesystem::remove_all(dir);
+}
+#endif
 
 }  // namespace
 }  // namespace arpos
