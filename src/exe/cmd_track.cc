@@ -64,7 +64,8 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
       "                      sim:CASE_DIR, openni2:, replay:SEQ_DIR?realtime); frames that arrive\n"
       "                      while one is tracked are dropped and counted; Ctrl-C stops and stores\n"
       "  --name NAME         the live run's name (default live-YYYYMMDD-HHMMSS)\n"
-      "  --record SEQ_DIR    also write every captured frame there (DATASET.md), replayable\n"
+      "  --record SEQ_DIR    also write every captured frame there (DATASET.md), replayable;\n"
+      "                      raw while tracking, the PNGs after the run\n"
       "  --seconds S         stop a live run after S seconds\n"
       "  --frames N          stop after N frames\n"
 #ifdef ARPOS_HAVE_STREAMING
@@ -163,6 +164,9 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
       if (!folder.note.empty()) std::cerr << "record: " << folder.note << "\n";
       RecorderOptions recorder_options;
       recorder_options.depth_scale = folder.depth_scale;
+      // Tracking needs the cores while it runs: raw images now, PNGs after.
+      recorder_options.encode_later = true;
+      recorder_options.writer_threads = 2;
       recorder.emplace(*record, recorder_options);
       options.record_dir = *record;
       options.on_capture = [&recorder](const RgbdFrame& frame) { recorder->Push(frame); };

@@ -1,6 +1,8 @@
 #include "sensor/recorder.h"
 
 #include <algorithm>
+#include <atomic>
+#include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
 #include "util/check.h"
@@ -17,6 +19,7 @@ std::string RecorderStats::Summary() const {
   const double span = last_timestamp_s - first_timestamp_s;
   if (pushed > 1 && span > 0) s += StringPrintf("; %.1f s recorded, %.1f fps captured", span, (pushed - 1) / span);
   s += StringPrintf("; queue at most %d", max_queue);
+  if (encode_seconds > 0) s += StringPrintf("; PNGs encoded after capture in %.1f s", encode_seconds);
   return s;
 }
 
@@ -28,7 +31,7 @@ SequenceRecorder::SequenceRecorder(const std::filesystem::path& out_dir, const R
       ARPOS_INPUT_ERROR(out_dir_.string() << ": exists and is not an empty folder; record into a new folder");
     }
   }
-  for (const char* sub : {"rgb", "depth"}) {
+  for (const char* sub : {"rgb", "depth", options_.encode_later ? ".spool" : "rgb"}) {
     std::filesystem::create_directories(out_dir_ / sub, ec);
     if (ec) ARPOS_INPUT_ERROR(out_dir_.string() << ": cannot create " << sub << "/ (" << ec.message() << ")");
   }
@@ -66,8 +69,31 @@ void SequenceRecorder::Push(const RgbdFrame& frame) {
   ready_.notify_one();
 }
 
+namespace {
+
+// A raw image file of the spool: rows, cols, type, then the pixels.
+bool WriteRaw(const std::filesystem::path& path, const cv::Mat& image) {
+  std::ofstream out(path, std::ios::binary);
+  const int header[3] = {image.rows, image.cols, image.type()};
+  out.write(reinterpret_cast<const char*>(header), sizeof header);
+  const cv::Mat whole = image.isContinuous() ? image : image.clone();
+  out.write(reinterpret_cast<const char*>(whole.data), static_cast<std::streamsize>(whole.total() * whole.elemSize()));
+  return static_cast<bool>(out);
+}
+
+cv::Mat ReadRaw(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  int header[3] = {0, 0, 0};
+  in.read(reinterpret_cast<char*>(header), sizeof header);
+  if (!in || header[0] <= 0 || header[1] <= 0) return {};
+  cv::Mat image(header[0], header[1], header[2]);
+  in.read(reinterpret_cast<char*>(image.data), static_cast<std::streamsize>(image.total() * image.elemSize()));
+  return in ? image : cv::Mat();
+}
+
+}  // namespace
+
 void SequenceRecorder::Write() {
-  const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, options_.png_compression};
   for (;;) {
     Item item;
     {
@@ -77,39 +103,58 @@ void SequenceRecorder::Write() {
       item = std::move(queue_.front());
       queue_.pop_front();
     }
-    const std::string name = StringPrintf("%.6f.png", item.timestamp_s);
-    bool colour_ok = false, depth_ok = false;
-    std::string failure;
-    try {
-      colour_ok = cv::imwrite((out_dir_ / "rgb" / name).string(), item.color, png);
-      if (!colour_ok) failure = (out_dir_ / "rgb" / name).string() + ": could not be written";
-      if (colour_ok && !item.depth.empty()) {
-        // Converted into a new image: the frame's own is shared with the caller.
-        cv::Mat depth;
-        if (options_.depth_scale > 0 && std::abs(item.depth_scale - options_.depth_scale) > 1e-9) {
-          item.depth.convertTo(depth, CV_16U, options_.depth_scale / item.depth_scale);
-        } else {
-          depth = item.depth;
-        }
-        depth_ok = cv::imwrite((out_dir_ / "depth" / name).string(), depth, png);
-        if (!depth_ok) failure = (out_dir_ / "depth" / name).string() + ": could not be written";
-      }
-    } catch (const cv::Exception& e) {
-      failure = e.what();
+    if (!options_.encode_later) {
+      WritePng(std::move(item));
+      continue;
     }
+    const std::string stem = StringPrintf("%.6f", item.timestamp_s);
+    const std::filesystem::path spool = out_dir_ / ".spool";
+    const bool ok = WriteRaw(spool / (stem + ".colour"), item.color) &&
+                    (item.depth.empty() || WriteRaw(spool / (stem + ".depth"), item.depth));
     std::lock_guard<std::mutex> lock(mutex_);
-    if (colour_ok) {
-      ++stats_.written;
-      rgb_.push_back({item.timestamp_s, "rgb/" + name, 0});
-    }
-    if (depth_ok) {
-      ++stats_.depth_written;
-      depth_.push_back({item.timestamp_s, "depth/" + name, 0});
-    }
-    if (!failure.empty()) {
+    if (ok) {
+      spooled_.push_back({item.timestamp_s, item.depth_scale, !item.depth.empty()});
+    } else {
       ++stats_.write_failures;
-      if (stats_.first_failure.empty()) stats_.first_failure = failure;
+      if (stats_.first_failure.empty()) stats_.first_failure = (spool / stem).string() + ": could not be written";
     }
+  }
+}
+
+void SequenceRecorder::WritePng(Item item) {
+  const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, options_.png_compression};
+  const std::string name = StringPrintf("%.6f.png", item.timestamp_s);
+  bool colour_ok = false, depth_ok = false;
+  std::string failure;
+  try {
+    colour_ok = cv::imwrite((out_dir_ / "rgb" / name).string(), item.color, png);
+    if (!colour_ok) failure = (out_dir_ / "rgb" / name).string() + ": could not be written";
+    if (colour_ok && !item.depth.empty()) {
+      // Converted into a new image: the frame's own is shared with the caller.
+      cv::Mat depth;
+      if (options_.depth_scale > 0 && std::abs(item.depth_scale - options_.depth_scale) > 1e-9) {
+        item.depth.convertTo(depth, CV_16U, options_.depth_scale / item.depth_scale);
+      } else {
+        depth = item.depth;
+      }
+      depth_ok = cv::imwrite((out_dir_ / "depth" / name).string(), depth, png);
+      if (!depth_ok) failure = (out_dir_ / "depth" / name).string() + ": could not be written";
+    }
+  } catch (const cv::Exception& e) {
+    failure = e.what();
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (colour_ok) {
+    ++stats_.written;
+    rgb_.push_back({item.timestamp_s, "rgb/" + name, 0});
+  }
+  if (depth_ok) {
+    ++stats_.depth_written;
+    depth_.push_back({item.timestamp_s, "depth/" + name, 0});
+  }
+  if (!failure.empty()) {
+    ++stats_.write_failures;
+    if (stats_.first_failure.empty()) stats_.first_failure = failure;
   }
 }
 
@@ -122,6 +167,33 @@ RecorderStats SequenceRecorder::Finish() {
   }
   for (auto& t : writers_) t.join();
   writers_.clear();
+  if (options_.encode_later) {
+    // The spool to PNGs, on every writer thread, then gone.
+    const auto encode_start = std::chrono::steady_clock::now();
+    std::atomic<size_t> next{0};
+    std::vector<std::thread> encoders;
+    for (int t = 0; t < std::max(1, options_.writer_threads); ++t) {
+      encoders.emplace_back([&] {
+        for (size_t k = next++; k < spooled_.size(); k = next++) {
+          const Spooled& s = spooled_[k];
+          const std::string stem = StringPrintf("%.6f", s.timestamp_s);
+          Item item{s.timestamp_s, ReadRaw(out_dir_ / ".spool" / (stem + ".colour")),
+                    s.has_depth ? ReadRaw(out_dir_ / ".spool" / (stem + ".depth")) : cv::Mat(), s.depth_scale};
+          if (item.color.empty()) {
+            std::lock_guard<std::mutex> lock(mutex_);
+            ++stats_.write_failures;
+            if (stats_.first_failure.empty()) stats_.first_failure = stem + ": the spooled frame could not be read";
+            continue;
+          }
+          WritePng(std::move(item));
+        }
+      });
+    }
+    for (auto& t : encoders) t.join();
+    std::error_code ec;
+    std::filesystem::remove_all(out_dir_ / ".spool", ec);
+    stats_.encode_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - encode_start).count();
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   finished_ = true;
   const auto by_time = [](const ImageListEntry& a, const ImageListEntry& b) { return a.timestamp_s < b.timestamp_s; };

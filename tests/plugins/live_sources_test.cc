@@ -240,6 +240,47 @@ TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
   EXPECT_THROW(PrepareRecordingFolder(dir.path() / "case" / "tracking" / "two", other, markers), InputError);
 }
 
+TEST(Recorder, EncodingLaterWritesTheSameSequenceAndLeavesNoSpool) {
+  TempDir dir;
+  RecorderOptions options;
+  options.encode_later = true;
+  options.writer_threads = 2;
+  options.depth_scale = 5000;
+  std::vector<RgbdFrame> frames;
+  {
+    SequenceRecorder recorder(dir.path() / "seq", options);
+    for (int i = 0; i < 6; ++i) {
+      frames.push_back(SyntheticFrame(i, 1000));
+      if (i == 2) frames.back().depth.release();  // a frame without depth
+      recorder.Push(frames.back());
+    }
+    const RecorderStats stats = recorder.Finish();
+    EXPECT_EQ(stats.written, 6);
+    EXPECT_EQ(stats.depth_written, 5);
+    EXPECT_EQ(stats.write_failures, 0) << stats.first_failure;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "seq" / ".spool"));
+  const Sequence replay = Sequence::OpenEveryColourFrame(dir.path() / "seq");
+  ASSERT_EQ(replay.size(), 6u);
+  CameraIntrinsics camera;
+  camera.width = 64;
+  camera.height = 48;
+  camera.fx = camera.fy = 60;
+  camera.cx = 31.5;
+  camera.cy = 23.5;
+  camera.depth_scale = 5000;
+  for (size_t i = 0; i < 6; ++i) {
+    std::string depth_problem;
+    const RgbdFrame f = replay.LoadFrameColourFirst(i, camera, &depth_problem);
+    EXPECT_TRUE(SameImage(f.color, frames[i].color)) << i;
+    if (i == 2) {
+      EXPECT_TRUE(f.depth.empty());
+    } else {
+      EXPECT_NEAR(f.DepthM(3, 3), frames[i].DepthM(3, 3), 1e-9) << i;
+    }
+  }
+}
+
 TEST(Recorder, AFullQueueDropsFramesAndCountsThemInsteadOfWaiting) {
   TempDir dir;
   RecorderOptions options;
