@@ -61,8 +61,8 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
       "  --tolerance-mm MM   translation tolerance (default 2)\n"
       "  --tolerance-deg DEG rotation tolerance (default 1)\n"
       "  --source SPEC       track a camera source live instead of SEQ_DIR (`arpos sources`:\n"
-      "                      sim:CASE_DIR, openni2:, replay:SEQ_DIR?realtime); frames that arrive\n"
-      "                      while one is tracked are dropped and counted; Ctrl-C stops and stores\n"
+      "                      sim:CASE_DIR, openni2:, replay:SEQ_DIR?realtime); a frame more than\n"
+      "                      two behind the camera is dropped and counted; Ctrl-C stops and stores\n"
       "  --name NAME         the live run's name (default live-YYYYMMDD-HHMMSS)\n"
       "  --record SEQ_DIR    also write every captured frame there (DATASET.md), replayable;\n"
       "                      raw while tracking, the PNGs after the run\n"
@@ -238,7 +238,7 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
   }
 #endif
   if (live) {
-    std::cerr << StringPrintf("live: %d frames captured, %d tracked, %d dropped while a frame was tracked\n",
+    std::cerr << StringPrintf("live: %d frames captured, %d tracked, %d dropped (the tracker too far behind)\n",
                               result.sequence_frames, result.frames, result.dropped);
   }
   std::cerr << result.response_message << "\n";

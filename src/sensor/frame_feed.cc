@@ -1,9 +1,11 @@
 #include "sensor/frame_feed.h"
 
+#include <algorithm>
+
 namespace arpos {
 
-FrameFeed::FrameFeed(CameraSource* source, std::function<void(const RgbdFrame&)> on_capture)
-    : source_(source), on_capture_(std::move(on_capture)) {
+FrameFeed::FrameFeed(CameraSource* source, std::function<void(const RgbdFrame&)> on_capture, int max_queue)
+    : source_(source), on_capture_(std::move(on_capture)), max_queue_(static_cast<size_t>(std::max(1, max_queue))) {
   source_->Open();
   live_ = source_->live();
   if (live_) thread_ = std::thread([this] { Capture(); });
@@ -22,8 +24,11 @@ void FrameFeed::Capture() {
     if (on_capture_) on_capture_(frame);
     std::lock_guard<std::mutex> lock(mutex_);
     ++captured_;
-    if (slot_) ++dropped_;
-    slot_ = std::move(frame);
+    if (queue_.size() >= max_queue_) {
+      queue_.pop_front();
+      ++dropped_;
+    }
+    queue_.push_back(std::move(frame));
     ready_.notify_one();
   }
   std::lock_guard<std::mutex> lock(mutex_);
@@ -45,10 +50,10 @@ bool FrameFeed::Take(RgbdFrame* frame) {
     return true;
   }
   std::unique_lock<std::mutex> lock(mutex_);
-  ready_.wait(lock, [&] { return slot_.has_value() || ended_ || stop_; });
-  if (stop_ || !slot_) return false;
-  *frame = std::move(*slot_);
-  slot_.reset();
+  ready_.wait(lock, [&] { return !queue_.empty() || ended_ || stop_; });
+  if (stop_ || queue_.empty()) return false;
+  *frame = std::move(queue_.front());
+  queue_.pop_front();
   ++taken_;
   return true;
 }

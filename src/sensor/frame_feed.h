@@ -1,9 +1,10 @@
 #pragma once
 /// Frames from a camera source to one reader, the way a live camera gives
 /// them: a live source (CameraSource::live()) runs on a capture thread of its
-/// own and the reader takes the newest frame; frames that arrive while the
-/// reader is busy are dropped and counted, so capture never waits for
-/// processing. A recording (not live) is read frame by frame on the reader's
+/// own and the reader takes frames in order from a queue of at most
+/// `max_queue` frames; when a frame arrives at a full queue the oldest is
+/// dropped and counted, so capture never waits for processing and the reader
+/// is never more than `max_queue` frames behind (1: always the newest). A recording (not live) is read frame by frame on the reader's
 /// thread and nothing is dropped.
 ///
 /// `on_capture` sees every frame the source delivers, dropped or not, on the
@@ -13,7 +14,7 @@
 #include <condition_variable>
 #include <functional>
 #include <mutex>
-#include <optional>
+#include <deque>
 #include <thread>
 
 #include "sensor/camera_source.h"
@@ -24,12 +25,12 @@ class FrameFeed {
  public:
   /// Opens `source` (which must outlive the feed) and, when live, starts
   /// capturing at once.
-  FrameFeed(CameraSource* source, std::function<void(const RgbdFrame&)> on_capture = {});
+  FrameFeed(CameraSource* source, std::function<void(const RgbdFrame&)> on_capture = {}, int max_queue = 1);
   ~FrameFeed();
   FrameFeed(const FrameFeed&) = delete;
   FrameFeed& operator=(const FrameFeed&) = delete;
 
-  /// The next frame (live: the newest not yet taken), waiting for it; false
+  /// The next frame (live: the oldest queued), waiting for it; false
   /// at the end of the stream or after Stop().
   bool Take(RgbdFrame* frame);
   /// Stops capturing and closes the source; Take returns false from then on.
@@ -37,7 +38,7 @@ class FrameFeed {
 
   int captured() const;  ///< frames the source delivered
   int taken() const;     ///< frames handed to the reader
-  int dropped() const;   ///< live: frames overwritten before they were taken
+  int dropped() const;   ///< live: frames pushed out of the queue before they were taken
 
  private:
   void Capture();
@@ -47,7 +48,8 @@ class FrameFeed {
   bool live_ = false;
   mutable std::mutex mutex_;
   std::condition_variable ready_;
-  std::optional<RgbdFrame> slot_;
+  size_t max_queue_ = 1;
+  std::deque<RgbdFrame> queue_;
   bool ended_ = false;
   bool stop_ = false;
   int captured_ = 0, taken_ = 0, dropped_ = 0;

@@ -271,7 +271,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   double last_t = -1;
   const int stream_frames = source->frame_count();
   const size_t count = stream_frames > 0 ? static_cast<size_t>(stream_frames) : 0;
-  FrameFeed feed(source, options.on_capture);
+  FrameFeed feed(source, options.on_capture, options.live_queue_frames);
   for (size_t i = 0;; ++i) {
     if (options.max_frames > 0 && static_cast<int>(i) >= options.max_frames) break;
     if (options.before_frame && !options.before_frame(i, count)) {

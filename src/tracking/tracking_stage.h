@@ -95,9 +95,12 @@ struct TrackSequenceOptions {
   std::filesystem::path case_dir;
   /// A camera source to track instead (`arpos track --source`; not owned,
   /// opened and closed here). A live source runs on a capture thread of its
-  /// own and frames that arrive while a frame is tracked are dropped and
-  /// counted (sensor/frame_feed.h). Its intrinsics are used for tracking.
+  /// own; frames more than live_queue_frames behind are dropped and counted
+  /// (sensor/frame_feed.h). Its intrinsics are used for tracking.
   CameraSource* source = nullptr;
+  /// A live source: frames that may wait while one is tracked (a spike of a
+  /// slow frame is caught up; more behind than this, the oldest is dropped).
+  int live_queue_frames = 2;
   /// Stop after this many frames (0: the whole stream).
   int max_frames = 0;
   /// Every frame the source delivers, tracked or dropped, on the capture

@@ -147,6 +147,21 @@ TEST(FrameFeed, ASlowReaderOfALiveSourceLosesFramesThatAreCounted) {
   EXPECT_EQ(last_index, 39);  // the newest frame is never lost at the end
 }
 
+TEST(FrameFeed, AQueueCatchesUpASlowFrameWithoutLosingOne) {
+  FakeLiveSource source(30, std::chrono::milliseconds(10));
+  FrameFeed feed(&source, {}, 3);
+  RgbdFrame frame;
+  int n = 0;
+  while (feed.Take(&frame)) {
+    EXPECT_EQ(frame.index, n);  // in order, none missing
+    // One slow frame (two intervals), the rest quick.
+    std::this_thread::sleep_for(std::chrono::milliseconds(n == 5 ? 20 : 0));
+    ++n;
+  }
+  EXPECT_EQ(n, 30);
+  EXPECT_EQ(feed.dropped(), 0);
+}
+
 TEST(FrameFeed, ARecordingIsReadWholeAndStopEndsALiveFeed) {
   FakeLiveSource recording(10, std::chrono::milliseconds(0));
   recording.live_ = false;
