@@ -334,7 +334,8 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     if (readable) totals.push_back(tm.total_ms);
 
     TrackingFrameRecord record;
-    record.frame_index = static_cast<std::int64_t>(i);
+    // The camera's frame number: a live run's dropped frames show as gaps.
+    record.frame_index = static_cast<std::int64_t>(frame.index >= 0 ? static_cast<size_t>(frame.index) : i);
     record.timestamp_s = t;
     record.status = tracked.correction.state == CorrectionState::kIn    ? TrackingFrameStatus::kInTolerance
                     : tracked.correction.state == CorrectionState::kOut ? TrackingFrameStatus::kOutOfTolerance
