@@ -12,6 +12,11 @@ FrameView::FrameView(QWidget* parent) : QLabel(parent) {
 }
 
 void FrameView::ShowColor(const cv::Mat& bgr) {
+  if (bgr.empty()) {  // nothing to show (a live camera not started)
+    image_ = QImage();
+    UpdatePixmap();
+    return;
+  }
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
   image_ = QImage(rgb.data, rgb.cols, rgb.rows, static_cast<int>(rgb.step), QImage::Format_RGB888).copy();
@@ -33,7 +38,10 @@ void FrameView::resizeEvent(QResizeEvent* event) {
 }
 
 void FrameView::UpdatePixmap() {
-  if (image_.isNull()) return;
+  if (image_.isNull()) {
+    clear();
+    return;
+  }
   setPixmap(QPixmap::fromImage(image_).scaled(size(), Qt::KeepAspectRatio, Qt::SmoothTransformation));
 }
 

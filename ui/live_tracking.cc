@@ -4,7 +4,9 @@
 
 #include "room_map/plan_stage.h"
 #include "sensor/case_config.h"
+#include "sensor/camera_source.h"
 #include "sensor/sequence.h"
+#include "sensor/source_plugin.h"
 #include "store/sqlite_database.h"
 #include "tracking/overlay.h"
 #include "tracking/tracking_stage.h"
@@ -216,7 +218,12 @@ void LiveTracking::Run(LiveRunRequest request) {
         static_cast<long long>(inputs.room_map_id.value()), static_cast<long long>(inputs.alignment_id.value()),
         inputs.model_from_marker.size())));
     std::vector<double> timestamps;
-    {
+    std::unique_ptr<CameraSource> source;
+    if (!request.source_spec.empty()) {
+      // A camera keeps its own pace.
+      source = SourceRegistry().Create(request.source_spec);
+      recorded_pace_ = false;
+    } else {
       const Sequence sequence = Sequence::OpenEveryColourFrame(request.sequence_dir);
       for (size_t i = 0; i < sequence.size(); ++i) timestamps.push_back(sequence.timestamp_s(i));
     }
@@ -227,6 +234,7 @@ void LiveTracking::Run(LiveRunRequest request) {
 
     TrackSequenceOptions options;
     options.sequence_dir = request.sequence_dir;
+    options.source = source.get();
     options.name = request.name;
     options.tolerances = request.tolerances;
     options.op = request.op;

@@ -1,5 +1,6 @@
 #pragma once
-/// Tracking mode live in the GUI: a recorded sequence tracked frame by frame
+/// Tracking mode live in the GUI: a live camera source, or a recorded
+/// sequence played as if live, tracked frame by frame
 /// on a worker thread (TrackSequence with its per-frame hooks), the run
 /// stored when the sequence ends or the user stops. Every tracked frame
 /// reaches the GUI as a queued FrameTracked signal (none dropped); the AR
@@ -43,7 +44,7 @@ namespace arpos::ui {
 /// One tracked frame as the GUI shows it.
 struct LiveFrame {
   int index = 0;  ///< frame index in the sequence
-  int count = 0;  ///< frames in the sequence
+  int count = 0;  ///< frames in the sequence (0: a live stream)
   double timestamp_s = 0;
   TrackingState state = TrackingState::kLost;
   CouchCorrection correction;
@@ -58,6 +59,9 @@ struct LiveRunRequest {
   std::string store_path;
   std::filesystem::path case_dir;
   std::filesystem::path sequence_dir;
+  /// A live camera source instead of sequence_dir (`arpos sources`, e.g.
+  /// openni2: or sim:CASE); frames come at the camera's pace.
+  std::string source_spec;
   std::string name;  ///< the run's sequence name
   std::optional<SessionId> session;  ///< empty: the newest with an alignment
   std::optional<RecordingId> recording_id;  ///< the stored recording of the sequence, if any

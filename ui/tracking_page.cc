@@ -10,7 +10,9 @@
 #include <QMouseEvent>
 #include <QPushButton>
 #include <QVBoxLayout>
+#include <QDateTime>
 #include <QWizard>
+#include <cstring>
 #include <set>
 #include <sqlite3.h>
 
@@ -18,6 +20,7 @@
 #include "sensor/case_config.h"
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
+#include "sensor/source_plugin.h"
 #include "store/database.h"
 #include "store/describe.h"
 #include "store/sqlite_database.h"
@@ -84,6 +87,9 @@ QString StateText(TrackingState state) {
 
 }  // namespace
 
+// A live source's item in the recording list: this tag, then its spec.
+const char TrackingPage::kLiveTag[] = "live-source:";
+
 TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(parent), state_(state) {
   setTitle(tr("Tracking"));
   setSubTitle(tr("Live positioning: the patient now (red) and as planned (blue) over the camera image, and the "
@@ -141,7 +147,10 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   layout->addWidget(status_);
 
   connect(sessions_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] { ListRecordings(); });
-  connect(recordings_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] { ShowFirstFrame(); });
+  connect(recordings_, QOverload<int>::of(&QComboBox::currentIndexChanged), this, [this] {
+    ShowFirstFrame();
+    UpdateButtons();
+  });
   connect(play_button_, &QPushButton::clicked, this, &TrackingPage::Play);
   connect(step_button_, &QPushButton::clicked, this, &TrackingPage::StepOnce);
   connect(stop_button_, &QPushButton::clicked, this, [this] {
@@ -179,6 +188,7 @@ void TrackingPage::initializePage() {
     }
     filters_installed_ = true;
   }
+  live_sources_listed_ = false;
   ListSessions();
   if (!launch_.sequence.isEmpty()) {
     const int index = recordings_->findText(launch_.sequence);
@@ -187,6 +197,9 @@ void TrackingPage::initializePage() {
     } else {
       status_->setText(tr("No recording \"%1\" here.").arg(launch_.sequence));
     }
+  }
+  if (!launch_.source.isEmpty() && launch_.sequence.isEmpty()) {
+    recordings_->setCurrentIndex(recordings_->findData(QString(kLiveTag) + launch_.source));
   }
   pace_->setCurrentIndex(launch_.recorded_pace ? 0 : 1);
   if (launch_.play && !launched_) {
@@ -297,13 +310,52 @@ void TrackingPage::ListRecordings() {
   // The session's own recordings that are not the case's.
   for (const RecordingRecord& r : stored) {
     if (!listed.insert(AbsolutePath(r.path)).second) continue;
+    if (r.path.rfind("live: ", 0) == 0) continue;  // a live run: nothing to play again
     recordings_->addItem(tr("recording %1: %2").arg(r.id.value()).arg(Q(r.name)), Q(r.path));
   }
+  ListLiveSources();
   UpdateButtons();
+}
+
+void TrackingPage::ListLiveSources() {
+  // The cameras attached now (listed once a page visit: OpenNI2 takes ~0.5 s
+  // to look), the simulated camera of a simulated case, and the launch's.
+  if (!live_sources_listed_) {
+    live_sources_listed_ = true;
+    live_sources_.clear();
+    for (const auto& kind : SourceRegistry().Kinds()) {
+      if (!kind.lister || kind.name == "replay" || kind.name == "sim") continue;
+      try {
+        for (const std::string& device : kind.lister().devices) {
+          const std::string spec = device.substr(0, device.find(' '));
+          live_sources_.emplace_back(tr("live: %1").arg(Q(device)), Q(spec));
+        }
+      } catch (const std::exception&) {
+      }
+    }
+  }
+  for (const auto& [label, spec] : live_sources_) recordings_->addItem(label, QString(kLiveTag) + spec);
+  const std::filesystem::path case_dir = state_->options.case_dir;
+  if (!case_dir.empty() && std::filesystem::exists(case_dir / "simulation.yaml") && SourceRegistry().Has("sim")) {
+    recordings_->addItem(tr("live: simulated camera (%1)").arg(Q(case_dir.filename().string())),
+                         QString(kLiveTag) + Q("sim:" + case_dir.string() + "?frames=300"));
+  }
+  if (!launch_.source.isEmpty()) {
+    recordings_->addItem(tr("live: %1").arg(launch_.source), QString(kLiveTag) + launch_.source);
+  }
 }
 
 void TrackingPage::ShowFirstFrame() {
   if (live_->running() || recordings_->currentIndex() < 0 || state_->options.case_dir.empty()) return;
+  const QString data = recordings_->currentData().toString();
+  if (data.startsWith(kLiveTag)) {
+    frame_view_->ShowColor(cv::Mat());
+    frame_label_->setStyleSheet("");
+    frame_label_->setText(tr("Live camera %1: Play starts it; frames come at the camera's pace, and a frame more "
+                             "than two behind is dropped (counted in the run's summary).")
+                              .arg(data.mid(static_cast<int>(std::strlen(kLiveTag)))));
+    return;
+  }
   try {
     const CaseConfig config = LoadCaseConfig(std::filesystem::path(state_->options.case_dir) / "case.yaml");
     const Sequence sequence = Sequence::OpenEveryColourFrame(recordings_->currentData().toString().toStdString());
@@ -336,7 +388,7 @@ void TrackingPage::UpdateButtons() {
                                       : "");
   sessions_->setEnabled(!running);
   recordings_->setEnabled(!running);
-  pace_->setEnabled(!running);
+  pace_->setEnabled(!running && !recordings_->currentData().toString().startsWith(kLiveTag));
 }
 
 void TrackingPage::Play() {
@@ -369,9 +421,15 @@ void TrackingPage::StartRun(bool paused) {
   LiveRunRequest request;
   request.store_path = state_->options.store_path;
   request.case_dir = state_->options.case_dir;
-  request.sequence_dir = recordings_->currentData().toString().toStdString();
-  request.name = request.sequence_dir.filename().string();
-  if (request.name.empty()) request.name = request.sequence_dir.parent_path().filename().string();
+  const QString data = recordings_->currentData().toString();
+  if (data.startsWith(kLiveTag)) {
+    request.source_spec = data.mid(static_cast<int>(std::strlen(kLiveTag))).toStdString();
+    request.name = QDateTime::currentDateTime().toString("'live-'yyyyMMdd-HHmmss").toStdString();
+  } else {
+    request.sequence_dir = data.toStdString();
+    request.name = request.sequence_dir.filename().string();
+    if (request.name.empty()) request.name = request.sequence_dir.parent_path().filename().string();
+  }
   request.session = SessionId(sessions_->currentData().toLongLong());
   request.op = state_->op;
   const auto stored = stored_recordings_.find(AbsolutePath(request.sequence_dir.string()));
@@ -397,11 +455,9 @@ void TrackingPage::OnFrame(const LiveFrame& frame) {
   panel_->ShowCorrection(frame.correction, reason);
   panel_->ShowRate(frame.frames_per_s, frame.latency_ms);
   plot_->Add(frame.timestamp_s, frame.correction);
-  QString text = tr("Frame %1 of %2, t = %3 s: %4")
-                     .arg(frame.index + 1)
-                     .arg(frame.count)
-                     .arg(frame.timestamp_s, 0, 'f', 3)
-                     .arg(StateText(frame.state));
+  QString text = (frame.count > 0 ? tr("Frame %1 of %2").arg(frame.index + 1).arg(frame.count)
+                                  : tr("Frame %1 (live)").arg(frame.index + 1)) +
+                 tr(", t = %1 s: %2").arg(frame.timestamp_s, 0, 'f', 3).arg(StateText(frame.state));
   if (!frame.readable) text += tr(" (colour image unreadable)");
   else if (!frame.has_depth) text += tr(" (no depth image)");
   if (!frame.note.isEmpty()) text += tr(". %1").arg(frame.note.left(240));

@@ -32,6 +32,7 @@ class FrameView;
 struct TrackingPageLaunch {
   bool play = false;            ///< start tracking the chosen recording at once
   QString sequence;             ///< choose this recording (its label, e.g. "tracking/seq_00")
+  QString source;               ///< a camera source to list and choose (e.g. "openni2:", "sim:CASE")
   bool recorded_pace = true;    ///< false: as fast as tracking goes
   int pause_after_frames = -1;  ///< pause by itself after this many frames
 };
@@ -92,6 +93,11 @@ class TrackingPage : public QWizardPage {
   int images_shown_ = 0;  ///< overlay images shown in this run
   bool filters_installed_ = false;
   bool launched_ = false;
+  static const char kLiveTag[];
+  /// Cameras found attached (label, spec), looked for once a page visit.
+  std::vector<std::pair<QString, QString>> live_sources_;
+  bool live_sources_listed_ = false;
+  void ListLiveSources();
   /// Stored tracking recordings of the chosen session, by absolute path.
   std::map<std::string, long long> stored_recordings_;
 };

@@ -33,6 +33,8 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
       "  --play              start tracking the recording at once (quitting stops it and\n"
       "                      stores the frames tracked so far)\n"
       "  --sequence NAME     the recording to choose, as listed (e.g. tracking/seq_00)\n"
+      "  --source SPEC       list this camera source and choose it (`arpos sources`: openni2:,\n"
+      "                      sim:CASE?frames=N)\n"
       "  --fast              as fast as tracking goes (default: the recording's pace)\n"
       "  --pause-after N     pause by itself once N frames are tracked\n"
       "  --steps N           press Step N times, 1.5 s apart, from 2 s after opening\n"
@@ -45,7 +47,7 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
       "  --answer-close A    answer a question the window asks on closing: yes or no\n"
       "                      (its text is printed)\n";
   const Args args(argv,
-                  {"store", "case", "page", "screenshot", "screenshot-delay", "sequence", "pause-after",
+                  {"store", "case", "page", "screenshot", "screenshot-delay", "sequence", "source", "pause-after",
                    "close-after", "answer-close", "steps", "select", "filter"},
                   {"help", "play", "fast", "screenshot-when-done"});
   if (args.Has("help")) {
@@ -56,10 +58,10 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
   if (page < 0 || page > 4) ARPOS_INPUT_ERROR("--page must be 0..4");
   const long long steps = args.GetInt("steps", 0);
   if (steps < 0) ARPOS_INPUT_ERROR("--steps must be >= 0");
-  const bool tracking_options = args.Has("play") || args.Has("sequence") || args.Has("fast") || args.Has("steps") ||
+  const bool tracking_options = args.Has("play") || args.Has("sequence") || args.Has("source") || args.Has("fast") || args.Has("steps") ||
                                 args.Has("pause-after") || args.Has("screenshot-when-done");
   if (tracking_options && page != ui::ArposWizard::kTrackingPage) {
-    ARPOS_INPUT_ERROR("--play, --sequence, --fast, --steps, --pause-after and --screenshot-when-done need --page 3");
+    ARPOS_INPUT_ERROR("--play, --sequence, --source, --fast, --steps, --pause-after and --screenshot-when-done need --page 3");
   }
   if ((args.Has("select") || args.Has("filter")) && page != ui::ArposWizard::kAuditPage) {
     ARPOS_INPUT_ERROR("--select and --filter need --page 4");
@@ -97,6 +99,7 @@ int RunGuiCommand(const std::vector<std::string>& argv) {
   ui::TrackingPageLaunch launch;
   launch.play = args.Has("play");
   launch.sequence = QString::fromStdString(args.GetOr("sequence", ""));
+  launch.source = QString::fromStdString(args.GetOr("source", ""));
   launch.recorded_pace = !args.Has("fast");
   launch.pause_after_frames = static_cast<int>(pause_after);
   tracking->SetLaunch(launch);

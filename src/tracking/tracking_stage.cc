@@ -170,6 +170,7 @@ std::string TrackSequenceResult::Summary() const {
                       name.c_str(), frames, tracked, carried, lost, frames ? 100.0 * lost / frames : 0.0,
                       in_tolerance, out_of_tolerance);
   if (lost_with_stickers) out << StringPrintf("; %d lost with stickers in view", lost_with_stickers);
+  if (dropped) out << StringPrintf("; %d of %d camera frames dropped (the tracker too far behind)", dropped, sequence_frames);
   out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
   if (frames) out << "\n  last correction: " << DescribeCorrection(last_correction);
   return out.str();

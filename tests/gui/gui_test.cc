@@ -344,6 +344,34 @@ TEST_F(TrackingPageTest, PlaysTheSequenceToTheEndAndStoresTheRun) {
   EXPECT_GT(banner, 5000) << "no state banner";
 }
 
+// A live camera (the simulator as one, at 30 fps) chosen on the page: played
+// to its end, every frame the camera gave either tracked or counted as
+// dropped, the run stored under a live name, the overlay shown.
+TEST_F(TrackingPageTest, TracksALiveCameraAndStoresTheRun) {
+  const int runs_before = TrackingRunCount();
+  std::string out;
+  const cv::Mat shot = RunPage(Sample().string(),
+                               "--play --source 'sim:" + Sample().string() + "?frames=30&fps=30' --screenshot-when-done",
+                               "tracking_page_live", &out);
+  ASSERT_FALSE(shot.empty());
+  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
+  EXPECT_EQ(TrackingRunCount(), runs_before + 1);
+  std::vector<TrackingFrameRecord> frames;
+  const auto run = NewestRun(&frames);
+  ASSERT_TRUE(run.has_value());
+  EXPECT_EQ(run->sequence_name.rfind("live-", 0), 0u) << run->sequence_name;
+  int dropped = 0;
+  const size_t at = run->summary.find(" of 30 camera frames dropped");
+  if (at != std::string::npos) dropped = std::stoi(run->summary.substr(run->summary.rfind("; ", at) + 2));
+  EXPECT_EQ(static_cast<int>(frames.size()) + dropped, 30) << run->summary;
+  EXPECT_GE(frames.size(), 15u) << run->summary;
+  const cv::Rect image_area(0, 0, shot.cols * 3 / 5, shot.rows * 3 / 4);
+  const int red = CountPixels(shot, image_area, [](const cv::Vec3b& p) {
+    return p[2] > 110 && p[2] > p[1] + 60 && p[1] < 130;
+  });
+  EXPECT_GT(red, 5000) << "no model at the current pose (red)";
+}
+
 // Pause stops the frames: paused after the first, nothing more is tracked
 // for seconds (unpaused, the three frames take well under that); quitting
 // stores the one frame as a stopped run.
