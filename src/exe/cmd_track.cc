@@ -152,28 +152,9 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
                             static_cast<long long>(inputs.plan_id.value()),
                             static_cast<long long>(inputs.room_map_id.value()), inputs.model_from_marker.size());
   options.max_frames = static_cast<int>(max_frames);
-  std::unique_ptr<CameraSource> source;
-  std::optional<SequenceRecorder> recorder;
-  if (live) {
-    source = SourceRegistry().Create(args.Require("source"));
-    options.source = source.get();
-    options.name = args.GetOr("name", "live-" + LocalTimeStamp());
-    std::cerr << "source: " << source->description() << "\n";
-    if (auto record = args.Get("record")) {
-      const RecordingFolder folder = PrepareRecordingFolder(*record, source->intrinsics(), config);
-      if (!folder.note.empty()) std::cerr << "record: " << folder.note << "\n";
-      RecorderOptions recorder_options;
-      recorder_options.depth_scale = folder.depth_scale;
-      // Tracking needs the cores while it runs: raw images now, PNGs after.
-      recorder_options.encode_later = true;
-      recorder_options.writer_threads = 2;
-      recorder.emplace(*record, recorder_options);
-      options.record_dir = *record;
-      options.on_capture = [&recorder](const RgbdFrame& frame) { recorder->Push(frame); };
-    }
-  }
   // Ctrl-C (or a terminating signal) ends a run at the next frame: what was
-  // tracked is written and stored.
+  // tracked is written and stored. The server listens before the source and
+  // the recording are made: a port in use leaves nothing behind.
   std::signal(SIGINT, OnStopSignal);
   std::signal(SIGTERM, OnStopSignal);
 #ifdef ARPOS_HAVE_STREAMING
@@ -210,6 +191,26 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
     ARPOS_INPUT_ERROR("--igtl-wait and --igtl-bind need --igtl-port");
   }
 #endif
+  std::unique_ptr<CameraSource> source;
+  std::optional<SequenceRecorder> recorder;
+  if (live) {
+    source = SourceRegistry().Create(args.Require("source"));
+    options.source = source.get();
+    options.name = args.GetOr("name", "live-" + LocalTimeStamp());
+    std::cerr << "source: " << source->description() << "\n";
+    if (auto record = args.Get("record")) {
+      const RecordingFolder folder = PrepareRecordingFolder(*record, source->intrinsics(), config);
+      if (!folder.note.empty()) std::cerr << "record: " << folder.note << "\n";
+      RecorderOptions recorder_options;
+      recorder_options.depth_scale = folder.depth_scale;
+      // Tracking needs the cores while it runs: raw images now, PNGs after.
+      recorder_options.encode_later = true;
+      recorder_options.writer_threads = 2;
+      recorder.emplace(*record, recorder_options);
+      options.record_dir = *record;
+      options.on_capture = [&recorder](const RgbdFrame& frame) { recorder->Push(frame); };
+    }
+  }
   const auto start = std::chrono::steady_clock::now();
   options.before_frame = [&](size_t, size_t) {
     if (g_stop_requested) return false;
