@@ -132,6 +132,8 @@ void SimulatorSource::OpenImpl() {
       frame.color = rendered.color;
       frame.depth = rendered.depth;
       frame.depth_scale = s.intrinsics.depth_scale;
+      frame.true_room_from_camera = rendered.room_from_camera;
+      frame.true_room_from_model = rendered.room_from_model;
       s.frames.push_back(std::move(frame));
     }
   }
@@ -158,6 +160,8 @@ bool SimulatorSource::NextImpl(RgbdFrame* frame) {
   frame->depth = source.depth.clone();
   frame->depth_scale = source.depth_scale;
   frame->problem.clear();
+  frame->true_room_from_camera = source.true_room_from_camera;
+  frame->true_room_from_model = source.true_room_from_model;
   frame->arrival = std::chrono::steady_clock::now();
   ++s.next;
   return true;

@@ -12,7 +12,8 @@
 /// Rendering a frame takes longer than a camera's frame interval on two
 /// cores, so every frame is rendered when the source opens; the clock starts
 /// after that, and from then on frames are delivered at `fps` whether or not
-/// the reader keeps up (live() is true).
+/// the reader keeps up (live() is true). Each frame carries its true camera
+/// and patient poses, so a recording of it can be evaluated.
 
 #include <filesystem>
 #include <memory>

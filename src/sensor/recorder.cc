@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <fstream>
+#include <set>
 #include <opencv2/imgcodecs.hpp>
 
 #include "util/check.h"
@@ -65,6 +66,8 @@ void SequenceRecorder::Push(const RgbdFrame& frame) {
     return;
   }
   queue_.push_back({frame.timestamp_s, frame.color, frame.depth, frame.depth_scale});
+  if (frame.true_room_from_camera) camera_truth_.push_back({frame.timestamp_s, *frame.true_room_from_camera});
+  if (frame.true_room_from_model) body_truth_.push_back({frame.timestamp_s, *frame.true_room_from_model});
   stats_.max_queue = std::max(stats_.max_queue, static_cast<int>(queue_.size()));
   ready_.notify_one();
 }
@@ -201,6 +204,24 @@ RecorderStats SequenceRecorder::Finish() {
   std::sort(depth_.begin(), depth_.end(), by_time);
   WriteImageList(out_dir_ / "rgb.txt", rgb_, "colour images (arpos record)");
   WriteImageList(out_dir_ / "depth.txt", depth_, "depth images (arpos record)");
+  // Truth of the frames written only (a dropped frame has no images).
+  std::set<double> written;
+  for (const ImageListEntry& e : rgb_) written.insert(e.timestamp_s);
+  const auto kept = [&](std::vector<StampedPose> poses) {
+    poses.erase(std::remove_if(poses.begin(), poses.end(),
+                               [&](const StampedPose& p) { return written.count(p.timestamp_s) == 0; }),
+                poses.end());
+    std::sort(poses.begin(), poses.end(),
+              [](const StampedPose& a, const StampedPose& b) { return a.timestamp_s < b.timestamp_s; });
+    return poses;
+  };
+  if (!camera_truth_.empty()) {
+    WriteTrajectory(out_dir_ / "groundtruth.txt", kept(camera_truth_), "arpos record: true room_from_camera (the source's)");
+  }
+  if (!body_truth_.empty()) {
+    WriteTrajectory(out_dir_ / "body_groundtruth.txt", kept(body_truth_),
+                    "arpos record: true room_from_model (the source's)");
+  }
   if (started_) stats_.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   return stats_;
 }

@@ -76,6 +76,7 @@ class SequenceRecorder {
     cv::Mat color, depth;
     double depth_scale;
   };
+  std::vector<StampedPose> camera_truth_, body_truth_;  ///< frames that carried truth
   void Write();
   /// Writes one frame's PNGs and lists them (any thread).
   void WritePng(Item item);

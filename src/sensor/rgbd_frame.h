@@ -3,7 +3,10 @@
 
 #include <chrono>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
+
+#include "geometry/rigid3.h"
 
 namespace arpos {
 
@@ -20,6 +23,11 @@ struct RgbdFrame {
   /// When the frame reached the program (the source's capture thread, or
   /// when a recording's file was read): where latency is counted from.
   std::chrono::steady_clock::time_point arrival{};
+  /// Ground truth, when the source knows it (the simulator): the camera ->
+  /// room and reference model -> room poses of this frame. The recorder
+  /// writes them as groundtruth.txt and body_groundtruth.txt.
+  std::optional<Rigid3d> true_room_from_camera;
+  std::optional<Rigid3d> true_room_from_model;
 
   /// Depth in metres at pixel (u, v); 0 if there is no reading.
   double DepthM(int u, int v) const {

@@ -24,7 +24,7 @@ class CameraSourceRegistry;
 
 /// Bumped whenever CameraSource, CameraSourceRegistry or RgbdFrame change
 /// layout or meaning; a plugin built against another version is refused.
-#define ARPOS_SOURCE_PLUGIN_API_VERSION 1
+#define ARPOS_SOURCE_PLUGIN_API_VERSION 2
 #define ARPOS_SOURCE_PLUGIN_ENTRY "arpos_register_camera_sources"
 
 /// What a plugin defines (one per plugin):

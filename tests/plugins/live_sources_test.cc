@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <thread>
 
+#include "geometry/pose_error.h"
 #include "sensor/camera_source.h"
 #include "sensor/case_config.h"
 #include "sensor/frame_feed.h"
@@ -44,6 +45,9 @@ TEST(SimulatorSource, RendersTheCasesOwnTrackingFramesLive) {
   const CaseConfig config = LoadCaseConfig(kSample + "/case.yaml");
   EXPECT_EQ(source->intrinsics().width, config.camera.width);
   EXPECT_DOUBLE_EQ(source->intrinsics().fx, config.camera.fx);
+  const auto camera_truth = recorded.CameraGroundTruth();
+  const auto body_truth = recorded.BodyGroundTruth();
+  ASSERT_TRUE(camera_truth && body_truth);
   source->Open();
   RgbdFrame frame;
   size_t n = 0;
@@ -55,6 +59,10 @@ TEST(SimulatorSource, RendersTheCasesOwnTrackingFramesLive) {
     EXPECT_TRUE(SameImage(frame.color, expected.color)) << "colour of frame " << n;
     EXPECT_TRUE(SameImage(frame.depth, expected.depth)) << "depth of frame " << n;
     EXPECT_TRUE(frame.problem.empty());
+    // The truth it carries is the case's (files round to 1e-6 m).
+    ASSERT_TRUE(frame.true_room_from_camera && frame.true_room_from_model);
+    EXPECT_LT(ComputePoseError((*camera_truth)[n].room_from_x, *frame.true_room_from_camera).translation_mm, 0.01);
+    EXPECT_LT(ComputePoseError((*body_truth)[n].room_from_x, *frame.true_room_from_model).translation_mm, 0.01);
     // Paced: 5 ms apart at 200 fps (not faster; how much slower is the machine's).
     if (n > 0) EXPECT_GE(frame.arrival - previous, std::chrono::microseconds(4000));
     previous = frame.arrival;
@@ -223,6 +231,8 @@ TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
     SequenceRecorder recorder(seq, options);
     for (int i = 0; i < 5; ++i) {
       frames.push_back(SyntheticFrame(i, 1000));
+      frames.back().true_room_from_camera = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(i, 0, 1));
+      frames.back().true_room_from_model = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, i, 1));
       recorder.Push(frames.back());
     }
     RgbdFrame broken = SyntheticFrame(5, 1000);
@@ -239,6 +249,10 @@ TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
   }
   const Sequence replay = Sequence::OpenEveryColourFrame(seq);
   ASSERT_EQ(replay.size(), 5u);
+  // The truth the frames carried, for the frames written.
+  ASSERT_TRUE(replay.CameraGroundTruth() && replay.BodyGroundTruth());
+  ASSERT_EQ(replay.BodyGroundTruth()->size(), 5u);
+  EXPECT_NEAR((*replay.BodyGroundTruth())[3].room_from_x.translation.y(), 3.0, 1e-9);
   CameraIntrinsics case_camera = camera;
   case_camera.depth_scale = 5000;
   for (size_t i = 0; i < 5; ++i) {

@@ -4,7 +4,9 @@
 # on (--record) and OpenIGTLink's example client connected (--igtl-port,
 # --igtl-wait), one line a case:
 #   frames captured / tracked / dropped by tracking, lost %, ms per frame,
-#   recorder written / dropped, stream latency (correction to wire).
+#   recorder written / dropped, stream latency (correction to wire), and
+#   MTE / MRE of poses.txt against the truth the simulated camera gave (the
+#   recording's body_groundtruth.txt; a dropped frame counts as lost there).
 #   tests/tracking/measure_live.sh CASE:STORE [CASE:STORE ...]
 # CASE is a simulated case (arpos simulate) whose STORE has an open session
 # on it (arpos run-case CASE --store STORE --keep-open, or plan + session);
@@ -22,7 +24,7 @@ PORT=${PORT:-18950}
 [ -x "$ARPOS" ] && [ -x "$CLIENT" ] || { echo "measure_live: build arpos and igtl_receive_client first" >&2; exit 2; }
 [ $# -gt 0 ] || { sed -n '2,14p' "$0" >&2; exit 2; }
 mkdir -p "$WORK"
-printf 'case\tcaptured\ttracked\tdropped\tlost_pct\tms_mean\tms_p95\trec_written\trec_dropped\tigtl_mean_ms\tigtl_max_ms\n'
+printf 'case\tcaptured\ttracked\tdropped\tlost_pct\tms_mean\tms_p95\trec_written\trec_dropped\tigtl_mean_ms\tigtl_max_ms\tmte_mm\tmre_deg\tlost_or_dropped_pct\n'
 i=0
 for spec in "$@"; do
   case_dir=${spec%%:*}
@@ -64,6 +66,11 @@ for spec in "$@"; do
   rec_written=$(echo "$rec" | sed -n 's/.*: \([0-9]*\) frames written.*/\1/p')
   rec_dropped=$(echo "$rec" | sed -n 's/.*; \([0-9]*\) dropped (writer behind).*/\1/p')
   igtl_ms=$(echo "$igtl" | sed -n 's/.*wire \([0-9.]*\) ms mean, p95 [0-9.]*, max \([0-9.]*\).*/\1\t\2/p')
-  printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$name" "$captured" "$tracked" "$dropped" "$lost" "$ms" \
-    "$rec_written" "$rec_dropped" "$igtl_ms"
+  "$ARPOS" evaluate --gt "$run/case/tracking/live/body_groundtruth.txt" --est "$run/out/poses.txt" \
+    > "$run/evaluate.txt" 2>&1 || true
+  mte=$(sed -n 's/.*mean (MTE) \([0-9.]*\).*/\1/p' "$run/evaluate.txt")
+  mre=$(sed -n 's/.*mean (MRE) \([0-9.]*\).*/\1/p' "$run/evaluate.txt")
+  gone=$(sed -n 's/.*lost: [0-9]* (\([0-9.]*\) %).*/\1/p' "$run/evaluate.txt")
+  printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$name" "$captured" "$tracked" "$dropped" "$lost" "$ms" \
+    "$rec_written" "$rec_dropped" "$igtl_ms" "${mte:-n/a}" "${mre:-n/a}" "${gone:-n/a}"
 done
