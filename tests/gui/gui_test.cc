@@ -272,6 +272,20 @@ class TrackingPageTest : public ::testing::Test {
     if (newest && frames) *frames = database->GetTrackingFrames(newest->id);
     return newest;
   }
+  // Plays the page to the end with `options` (and --play, a screenshot when
+  // done): the one run it stored, with its frames; nullopt (and a failure)
+  // otherwise.
+  std::optional<TrackingRunRecord> PlayToTheEnd(const std::string& options, const std::string& artefact,
+                                                cv::Mat* shot, std::vector<TrackingFrameRecord>* frames) {
+    const int runs_before = TrackingRunCount();
+    std::string out;
+    *shot = RunPage(Sample().string(), "--play " + options + " --screenshot-when-done", artefact, &out);
+    EXPECT_FALSE(shot->empty());
+    EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
+    EXPECT_EQ(TrackingRunCount(), runs_before + 1);
+    if (shot->empty() || TrackingRunCount() != runs_before + 1) return std::nullopt;
+    return NewestRun(frames);
+  }
   int TrackingRunCount() {
     auto database = SqliteDatabase::Open(store().string());
     int n = 0;
@@ -299,15 +313,9 @@ int CountPixels(const cv::Mat& shot, const cv::Rect& roi, Pick pick) {
 // Played to the end: the run with every frame is stored, and the page shows
 // the overlay (red current pose, blue planned pose) and the correction panel.
 TEST_F(TrackingPageTest, PlaysTheSequenceToTheEndAndStoresTheRun) {
-  const int runs_before = TrackingRunCount();
-  std::string out;
-  const cv::Mat shot = RunPage(Sample().string(), "--play --fast --sequence tracking/seq_00 --screenshot-when-done",
-                               "tracking_page_end", &out);
-  ASSERT_FALSE(shot.empty());
-  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
-  EXPECT_EQ(TrackingRunCount(), runs_before + 1);
+  cv::Mat shot;
   std::vector<TrackingFrameRecord> frames;
-  const auto run = NewestRun(&frames);
+  const auto run = PlayToTheEnd("--fast --sequence tracking/seq_00", "tracking_page_end", &shot, &frames);
   ASSERT_TRUE(run.has_value());
   EXPECT_EQ(run->sequence_name, "seq_00");
   EXPECT_EQ(frames.size(), 3u);  // the sample's tracking/seq_00
@@ -348,16 +356,10 @@ TEST_F(TrackingPageTest, PlaysTheSequenceToTheEndAndStoresTheRun) {
 // to its end, every frame the camera gave either tracked or counted as
 // dropped, the run stored under a live name, the overlay shown.
 TEST_F(TrackingPageTest, TracksALiveCameraAndStoresTheRun) {
-  const int runs_before = TrackingRunCount();
-  std::string out;
-  const cv::Mat shot = RunPage(Sample().string(),
-                               "--play --source 'sim:" + Sample().string() + "?frames=30&fps=30' --screenshot-when-done",
-                               "tracking_page_live", &out);
-  ASSERT_FALSE(shot.empty());
-  EXPECT_NE(out.find("tracking run stored"), std::string::npos) << out;
-  EXPECT_EQ(TrackingRunCount(), runs_before + 1);
+  cv::Mat shot;
   std::vector<TrackingFrameRecord> frames;
-  const auto run = NewestRun(&frames);
+  const auto run = PlayToTheEnd("--source 'sim:" + Sample().string() + "?frames=30&fps=30'", "tracking_page_live", &shot,
+                                &frames);
   ASSERT_TRUE(run.has_value());
   EXPECT_EQ(run->sequence_name.rfind("live-", 0), 0u) << run->sequence_name;
   int dropped = 0;

@@ -205,17 +205,23 @@ RgbdFrame SyntheticFrame(int i, double depth_scale) {
   return frame;
 }
 
-TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
-  TempDir dir;
-  const std::filesystem::path seq = dir.path() / "case" / "tracking" / "rec";
-  // No case.yaml yet: one is written with the source's camera.
+// The 64x48 camera of SyntheticFrame.
+CameraIntrinsics SmallCamera(double depth_scale) {
   CameraIntrinsics camera;
   camera.width = 64;
   camera.height = 48;
   camera.fx = camera.fy = 60;
   camera.cx = 31.5;
   camera.cy = 23.5;
-  camera.depth_scale = 1000;
+  camera.depth_scale = depth_scale;
+  return camera;
+}
+
+TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
+  TempDir dir;
+  const std::filesystem::path seq = dir.path() / "case" / "tracking" / "rec";
+  // No case.yaml yet: one is written with the source's camera.
+  const CameraIntrinsics camera = SmallCamera(1000);
   CaseConfig markers;
   markers.room_markers = {0.15, 0, 49};
   markers.body_markers = {0.03, 100, 199};
@@ -253,8 +259,7 @@ TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
   ASSERT_TRUE(replay.CameraGroundTruth() && replay.BodyGroundTruth());
   ASSERT_EQ(replay.BodyGroundTruth()->size(), 5u);
   EXPECT_NEAR((*replay.BodyGroundTruth())[3].room_from_x.translation.y(), 3.0, 1e-9);
-  CameraIntrinsics case_camera = camera;
-  case_camera.depth_scale = 5000;
+  const CameraIntrinsics case_camera = SmallCamera(5000);
   for (size_t i = 0; i < 5; ++i) {
     const RgbdFrame f = replay.LoadFrame(i, case_camera);
     EXPECT_NEAR(f.timestamp_s, frames[i].timestamp_s, 1e-6);
@@ -291,13 +296,7 @@ TEST(Recorder, EncodingLaterWritesTheSameSequenceAndLeavesNoSpool) {
   EXPECT_FALSE(std::filesystem::exists(dir.path() / "seq" / ".spool"));
   const Sequence replay = Sequence::OpenEveryColourFrame(dir.path() / "seq");
   ASSERT_EQ(replay.size(), 6u);
-  CameraIntrinsics camera;
-  camera.width = 64;
-  camera.height = 48;
-  camera.fx = camera.fy = 60;
-  camera.cx = 31.5;
-  camera.cy = 23.5;
-  camera.depth_scale = 5000;
+  const CameraIntrinsics camera = SmallCamera(5000);
   for (size_t i = 0; i < 6; ++i) {
     std::string depth_problem;
     const RgbdFrame f = replay.LoadFrameColourFirst(i, camera, &depth_problem);
