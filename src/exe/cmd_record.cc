@@ -20,8 +20,7 @@ namespace {
 std::atomic<bool> g_interrupted{false};
 void OnInterrupt(int) { g_interrupted = true; }
 
-}  // namespace
-
+// The markers of DATASET.md's example, for a case.yaml the recorder writes.
 CaseConfig DatasetExampleMarkers() {
   CaseConfig config;
   config.dictionary = "DICT_4X4_250";
@@ -30,6 +29,8 @@ CaseConfig DatasetExampleMarkers() {
   config.body_markers = {0.03, 100, 199};
   return config;
 }
+
+}  // namespace
 
 int RunRecordCommand(const std::vector<std::string>& argv) {
   const char* usage =
@@ -64,7 +65,8 @@ int RunRecordCommand(const std::vector<std::string>& argv) {
   if (options.writer_threads < 1 || options.writer_threads > 16) ARPOS_INPUT_ERROR("--writers: 1..16 threads");
 
   std::unique_ptr<CameraSource> source = SourceRegistry().Create(spec);
-  const RecordingFolder folder = PrepareRecordingFolder(out, source->intrinsics(), DatasetExampleMarkers());
+  const RecordingFolder folder = PrepareRecordingFolder(out, source->intrinsics(), DatasetExampleMarkers(),
+                                                        "DATASET.md's example");
   if (!folder.note.empty()) std::cerr << "record: " << folder.note << "\n";
   options.depth_scale = folder.depth_scale;
   SequenceRecorder recorder(out, options);
@@ -74,7 +76,10 @@ int RunRecordCommand(const std::vector<std::string>& argv) {
   std::signal(SIGTERM, OnInterrupt);
   // The recorder sees every frame on the capture thread; this thread only
   // counts and watches the clock.
-  FrameFeed feed(source.get(), [&](const RgbdFrame& frame) { recorder.Push(frame); });
+  std::atomic<long long> offered{0};
+  FrameFeed feed(source.get(), [&](const RgbdFrame& frame) {
+    if (max_frames <= 0 || offered++ < max_frames) recorder.Push(frame);
+  });
   const auto start = std::chrono::steady_clock::now();
   RgbdFrame frame;
   int taken = 0;

@@ -199,7 +199,8 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
     options.name = args.GetOr("name", "live-" + LocalTimeStamp());
     std::cerr << "source: " << source->description() << "\n";
     if (auto record = args.Get("record")) {
-      const RecordingFolder folder = PrepareRecordingFolder(*record, source->intrinsics(), config);
+      const RecordingFolder folder = PrepareRecordingFolder(*record, source->intrinsics(), config,
+                                                          (*case_root / "case.yaml").string());
       if (!folder.note.empty()) std::cerr << "record: " << folder.note << "\n";
       RecorderOptions recorder_options;
       recorder_options.depth_scale = folder.depth_scale;

@@ -227,7 +227,7 @@ RecorderStats SequenceRecorder::Finish() {
 }
 
 RecordingFolder PrepareRecordingFolder(const std::filesystem::path& sequence_dir, const CameraIntrinsics& camera,
-                                       const CaseConfig& markers_from) {
+                                       const CaseConfig& markers_from, const std::string& markers_origin) {
   const std::filesystem::path dir = std::filesystem::absolute(sequence_dir).lexically_normal();
   RecordingFolder folder;
   folder.case_dir = dir.parent_path().filename() == "tracking" ? dir.parent_path().parent_path() : dir.parent_path();
@@ -251,7 +251,7 @@ RecordingFolder PrepareRecordingFolder(const std::filesystem::path& sequence_dir
   if (ec) ARPOS_INPUT_ERROR(folder.case_dir.string() << ": cannot create the case folder (" << ec.message() << ")");
   SaveCaseConfig(config, yaml);
   folder.depth_scale = camera.depth_scale;
-  folder.note = "wrote " + yaml.string() + " with the source's camera and the markers of DATASET.md's example (" +
+  folder.note = "wrote " + yaml.string() + " with the source's camera and the markers of " + markers_origin + " (" +
                 config.dictionary + "); edit it if your printed markers differ";
   return folder;
 }

@@ -104,14 +104,14 @@ class SequenceRecorder {
 /// folder is the grandparent for tracking/<name>, else the parent. With a
 /// case.yaml there, the camera must have its image size (InputError naming
 /// both otherwise) and depth is written in its units. Without one, a
-/// case.yaml is written with `camera` and the markers of `markers_from`,
-/// and `note` says so.
+/// case.yaml is written with `camera` and the markers of `markers_from`
+/// (`markers_origin` says whose, for the note), and `note` says so.
 struct RecordingFolder {
   std::filesystem::path case_dir;
   double depth_scale = 1000;
   std::string note;
 };
 RecordingFolder PrepareRecordingFolder(const std::filesystem::path& sequence_dir, const CameraIntrinsics& camera,
-                                       const CaseConfig& markers_from);
+                                       const CaseConfig& markers_from, const std::string& markers_origin);
 
 }  // namespace arpos

@@ -225,7 +225,7 @@ TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
   CaseConfig markers;
   markers.room_markers = {0.15, 0, 49};
   markers.body_markers = {0.03, 100, 199};
-  const RecordingFolder folder = PrepareRecordingFolder(seq, camera, markers);
+  const RecordingFolder folder = PrepareRecordingFolder(seq, camera, markers, "the test's markers");
   EXPECT_EQ(folder.case_dir, dir.path() / "case");
   EXPECT_FALSE(folder.note.empty());
   EXPECT_EQ(LoadCaseConfig(dir.path() / "case" / "case.yaml").camera.width, 64);
@@ -271,7 +271,7 @@ TEST(Recorder, WritesAReplayableSequenceInTheCasesDepthUnits) {
   EXPECT_THROW(SequenceRecorder(seq, options), InputError);
   CameraIntrinsics other = camera;
   other.width = 640;
-  EXPECT_THROW(PrepareRecordingFolder(dir.path() / "case" / "tracking" / "two", other, markers), InputError);
+  EXPECT_THROW(PrepareRecordingFolder(dir.path() / "case" / "tracking" / "two", other, markers, "the test's markers"), InputError);
 }
 
 TEST(Recorder, EncodingLaterWritesTheSameSequenceAndLeavesNoSpool) {
