@@ -99,8 +99,9 @@ std::string CorrectionsCsvRow(double timestamp_s, const CouchCorrection& c) {
 std::string DescribeCorrection(const CouchCorrection& c) {
   if (c.state == CorrectionState::kLost) return "patient lost: no correction";
   return StringPrintf("lat %+.1f  lng %+.1f  vrt %+.1f mm | pitch %+.2f  roll %+.2f  yaw %+.2f deg | %.1f mm %.2f deg %s",
-                      c.lateral_mm, c.longitudinal_mm, c.vertical_mm, c.pitch_deg, c.roll_deg, c.yaw_deg,
-                      c.translation_mm, c.rotation_deg,
+                      Printable(c.lateral_mm, 1), Printable(c.longitudinal_mm, 1), Printable(c.vertical_mm, 1),
+                      Printable(c.pitch_deg, 2), Printable(c.roll_deg, 2), Printable(c.yaw_deg, 2),
+                      Printable(c.translation_mm, 1), Printable(c.rotation_deg, 2),
                       c.state == CorrectionState::kIn ? "IN TOLERANCE" : "OUT OF TOLERANCE");
 }
 

@@ -119,6 +119,22 @@ TEST(CouchCorrection, InOnlyWhenTheCorrectionPlusItsUncertaintyIsWithinTolerance
   EXPECT_EQ(LostCorrection().state, CorrectionState::kLost);
 }
 
+// What rounds to zero reads +0.0, never -0.0 (the panel, the report, the
+// OpenIGTLink status string).
+TEST(CouchCorrection, DescriptionHasNoNegativeZero) {
+  CouchCorrection c;
+  c.state = CorrectionState::kOut;
+  c.lateral_mm = -0.04;
+  c.longitudinal_mm = -3.26;
+  c.pitch_deg = -0.004;
+  c.translation_mm = 3.3;
+  const std::string text = DescribeCorrection(c);
+  EXPECT_EQ(text.find("-0.0"), std::string::npos) << text;
+  EXPECT_NE(text.find("lat +0.0"), std::string::npos) << text;
+  EXPECT_NE(text.find("lng -3.3"), std::string::npos) << text;
+  EXPECT_NE(text.find("pitch +0.00"), std::string::npos) << text;
+}
+
 TEST(CouchCorrection, CsvRowsFollowTheHeader) {
   EXPECT_EQ(CorrectionsCsvHeader(),
             "timestamp,lateral_mm,longitudinal_mm,vertical_mm,pitch_deg,roll_deg,yaw_deg,translation_mm,rotation_deg,"
