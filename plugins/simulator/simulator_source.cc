@@ -1,7 +1,6 @@
 #include "plugins/simulator/simulator_source.h"
 
 #include <chrono>
-#include <sstream>
 #include <thread>
 
 #include "simulation/simulation_truth.h"
@@ -37,7 +36,6 @@ sim::SimulationOptions OptionsOf(const sim::SimulationTruth& truth) {
   }
   return options;
 }
-
 
 }  // namespace
 

@@ -8,6 +8,7 @@
 #include <ctime>
 #include <iostream>
 
+#include "eval/trajectory_eval.h"
 #include "exe/args.h"
 #include "room_map/plan_stage.h"
 #include "sensor/case_check.h"
@@ -224,16 +225,12 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
 #ifdef ARPOS_HAVE_STREAMING
   if (igtl) {
     const IgtlServer::Stats stats = igtl->stats();
-    std::vector<double> latency = stats.latency_ms;
-    std::sort(latency.begin(), latency.end());
-    double mean = 0;
-    for (double v : latency) mean += v / latency.size();
     std::cerr << StringPrintf("OpenIGTLink: %ld frames, %ld messages to %ld client(s)", stats.frames, stats.messages,
                               stats.accepted_clients);
-    if (!latency.empty()) {
-      std::cerr << StringPrintf("; correction to wire %.2f ms mean, p95 %.2f, max %.2f", mean,
-                                latency[std::min(latency.size() - 1, static_cast<size_t>(0.95 * latency.size()))],
-                                latency.back());
+    if (!stats.latency_ms.empty()) {
+      const ErrorStats latency = ComputeErrorStats(stats.latency_ms);
+      std::cerr << StringPrintf("; correction to wire %.2f ms mean, p95 %.2f, max %.2f", latency.mean, latency.p95,
+                                latency.max);
     }
     if (stats.dropped_clients) std::cerr << StringPrintf("; %ld client(s) dropped", stats.dropped_clients);
     std::cerr << "\n";
