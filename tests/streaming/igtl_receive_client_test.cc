@@ -242,7 +242,7 @@ int FreePort() {
 // (the simulator as a live camera at 30 fps) streaming to OpenIGTLink's
 // example client in its own process; every ModelToRoom and CameraToRoom the
 // client printed is the pose arpos wrote to poses.txt / camera_poses.txt for
-// that frame, in millimetres, and every frame has its STATUS.
+// that frame, in millimetres, and every tracked frame has its STATUS.
 TEST(IgtlReceiveClient, LiveTrackingStreamsThePosesOfPosesTxt) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() /
                                     StringPrintf("arpos_live_igtl_%d", static_cast<int>(::getpid()));
@@ -300,9 +300,13 @@ TEST(IgtlReceiveClient, LiveTrackingStreamsThePosesOfPosesTxt) {
   for (const StampedPose& p : camera_poses) {
     EXPECT_TRUE(printed_at(p.timestamp_s, p.room_from_x)) << "CameraToRoom at " << p.timestamp_s;
   }
+  // One STATUS for every frame tracked (a row of corrections.csv; on a busy
+  // machine some of the 30 camera frames may be dropped, and say so).
   int statuses = 0;
   for (const Printed& p : printed) statuses += p.type == "STATUS";
-  EXPECT_EQ(statuses, 30);
+  const int tracked = Count(ReadFile((dir / "out" / "corrections.csv").string()), "\n") - 1;
+  EXPECT_EQ(statuses, tracked);
+  EXPECT_GE(tracked, 15) << track_text;
   std::filesystem::remove_all(dir);
 }
 #endif
