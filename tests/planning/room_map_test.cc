@@ -1,9 +1,12 @@
 // Room map building on a small simulated case (tests/planning/planning_test_util.h).
+#include <bitset>
 #include <fstream>
+#include <random>
 
 #include <gtest/gtest.h>
 
 #include "planning/planning_test_util.h"
+#include "room_map/keypoints.h"
 #include "room_map/plan_stage.h"
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
@@ -17,6 +20,33 @@ namespace fs = std::filesystem;
 using testing::CompareMarkers;
 using testing::GetSmallCase;
 using testing::GetSmallCaseMap;
+
+TEST(Keypoints, HammingDistanceCountsEveryDifferingBit) {
+  // Against a plain bit count: all bits differing (32 bytes of 0xff against
+  // zeros, where a byte-wise count could overflow), single bits, random.
+  auto reference = [](const std::uint8_t* a, const std::uint8_t* b) {
+    int d = 0;
+    for (int i = 0; i < 32; ++i) d += static_cast<int>(std::bitset<8>(a[i] ^ b[i]).count());
+    return d;
+  };
+  std::uint8_t zeros[32] = {}, ones[32], a[32], b[32];
+  std::fill(ones, ones + 32, 0xff);
+  EXPECT_EQ(HammingDistance32(zeros, ones), 256);
+  EXPECT_EQ(HammingDistance32(ones, ones), 0);
+  for (int bit = 0; bit < 256; ++bit) {
+    std::fill(a, a + 32, 0);
+    a[bit / 8] = static_cast<std::uint8_t>(1u << (bit % 8));
+    ASSERT_EQ(HammingDistance32(a, zeros), 1) << "bit " << bit;
+  }
+  std::mt19937 random(7);
+  for (int trial = 0; trial < 2000; ++trial) {
+    for (int i = 0; i < 32; ++i) {
+      a[i] = static_cast<std::uint8_t>(random());
+      b[i] = static_cast<std::uint8_t>(trial % 3 == 0 ? ~a[i] ^ (random() % 2) : random());
+    }
+    ASSERT_EQ(HammingDistance32(a, b), reference(a, b)) << "trial " << trial;
+  }
+}
 
 TEST(RoomMap, MarkerCornersAreNearTheTruth) {
   const auto& c = GetSmallCase();
