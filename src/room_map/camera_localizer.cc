@@ -66,6 +66,7 @@ std::string CameraLocalizerOptions::Validate() const {
     out << "Hamming thresholds must be in 1..256";
   else if (!(match_ratio > 0 && match_ratio <= 1) || !(relocalisation_ratio > 0 && relocalisation_ratio <= 1))
     out << "match ratios must be in (0, 1]";
+  else if (relocalisation_max_landmarks < 1) out << "relocalisation_max_landmarks must be at least 1";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
@@ -120,6 +121,7 @@ struct CameraLocalizer::Impl {
   bool have_cov = false;
   Mat6 last_cov = Mat6::Zero();
   int frames_lost = 1 << 20;
+  int last_markers_used = 0;  // markers the last frame's pose used (0 when lost)
   bool have_last = false, have_prev = false;
   Rigid3d last_camera_from_room, prev_camera_from_room;
   double last_t = 0, prev_t = 0;
@@ -270,7 +272,7 @@ struct CameraLocalizer::Impl {
     return n;
   }
 
-  // Brute-force matching against the whole map (relocalisation).
+  // Brute-force matching against the map's first landmarks (relocalisation).
   int MatchGlobally() {
     const int n_kp = static_cast<int>(keypoints.size());
     match_of_keypoint.assign(n_kp, -1);
@@ -279,7 +281,8 @@ struct CameraLocalizer::Impl {
     for (int i = 0; i < n_kp; ++i) {
       const std::uint8_t* d = keypoints.descriptors.ptr<std::uint8_t>(i);
       int best = -1, d1 = 257, d2 = 257;
-      for (int l = 0; l < map.num_landmarks(); ++l) {
+      const int n_landmarks = std::min(map.num_landmarks(), options.relocalisation_max_landmarks);
+      for (int l = 0; l < n_landmarks; ++l) {
         const int dist = HammingDistance32(d, map.landmark_descriptors.ptr<std::uint8_t>(l));
         if (dist < d1) {
           d2 = d1;
@@ -505,6 +508,7 @@ CameraLocalizer::~CameraLocalizer() = default;
 void CameraLocalizer::Reset() {
   impl_->have_last = impl_->have_prev = impl_->have_cov = false;
   impl_->frames_lost = 1 << 20;
+  impl_->last_markers_used = 0;
 }
 
 LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame) { return Run(frame, nullptr); }
@@ -553,6 +557,14 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       full_detection_done = true;
     } else if (predicted && options_.marker_windows && !m.distortion) {
       m.DetectInWindows(*predicted);
+      if (m.markers.empty() && m.last_markers_used > 0) {
+        // The last frame had a marker and no window holds one now (it may
+        // sit at the border, or the prediction is off): the whole image,
+        // before keypoints alone decide the pose (measured: two frames
+        // 27-28 mm off on 34-43 keypoints beside a marker the windows missed).
+        m.DetectFull();
+        full_detection_done = true;
+      }
     } else {
       m.DetectFull();
       full_detection_done = true;
@@ -666,6 +678,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       out.message = why.str();
     }
   }
+  m.last_markers_used = out.markers_used;
   out.markers = m.markers;
   tm.total_ms = ThreadCpuMs() - start;
   return out;

@@ -13,7 +13,7 @@
 ///     map landmark the prediction puts in view is matched to keypoints within
 ///     a search radius of its predicted pixel (descriptor distance, depth
 ///     agreement, ratio test); when lost, all keypoints are matched against the
-///     whole map (brute force, ratio test);
+///     map's adjusted landmarks (brute force, ratio test);
 ///  4. relocalisation (no usable prediction): best single-marker pose
 ///     (IPPE + depth) or PnP + RANSAC on keypoint matches;
 ///  5. refinement: marker corners and keypoints jointly (and keypoint depth),
@@ -108,7 +108,11 @@ struct CameraLocalizerOptions {
   double max_camera_turn_deg_s = 60;
   double max_camera_turn_margin_deg = 5;
   double wide_search_radius_px = 50;
-  /// ... then by brute-force matching against the whole map.
+  /// ... then by brute-force matching against the map's first landmarks
+  /// (the adjusted ones, spread over the room: RoomMap), at most this many:
+  /// matching every keypoint against all of a map's 12000+ landmarks took
+  /// 60-70 ms a frame, a latency spike while the patient is shown.
+  int relocalisation_max_landmarks = 4000;
   int relocalisation_max_hamming = 50;
   double relocalisation_ratio = 0.8;
   int ransac_iterations = 200;

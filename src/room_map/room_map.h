@@ -50,6 +50,9 @@ struct RoomMap {
   std::vector<RoomMapMarkerEntry> markers;  ///< sorted by id, ids unique
   /// Landmark positions in the room frame and, row for row, their descriptors
   /// (CV_8UC1, kDescriptorBytes columns). Both empty without a keypoint layer.
+  /// Order: the landmarks of the joint adjustment first (the best-supported,
+  /// spread over the room), then those placed afterwards for localisation
+  /// only (room_map_builder.h); a prefix is a fair sample of the room.
   std::vector<Eigen::Vector3d> landmarks_in_room;
   cv::Mat landmark_descriptors;
   double mean_residual_px = 0;  ///< marker corners, over all markers and views

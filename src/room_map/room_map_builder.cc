@@ -70,6 +70,134 @@ const std::uint8_t* Descriptor(const std::vector<FrameData>& frames, int slot, i
   return frames[slot].keypoints.descriptors.ptr<std::uint8_t>(kp);
 }
 
+// The candidates the thinning left out, triangulated against the adjusted
+// cameras (held fixed) and appended to the map for localisation only: each
+// point starts from its best-depth observation, Gauss-Newton on reprojection
+// and depth residuals (the adjustment's sigmas), observations beyond
+// outlier_sigmas dropped and the point solved again; kept with at least
+// min_landmark_observations inliers, outside the exclusion boxes, in front
+// of every camera that saw it. Descriptor: the medoid of its inliers.
+void AddLocalizationLandmarks(const std::vector<Candidate>& candidates, const std::vector<bool>& in_adjustment,
+                              const std::vector<FrameData>& frames, const std::vector<int>& camera_slot,
+                              const std::vector<Rigid3d>& camera_from_room, const CameraIntrinsics& K,
+                              const DepthCorrection& depth_correction, const BaOptions& ba_options,
+                              const RoomMapBuildOptions& options, RoomMap* map, RoomMapBuildReport* report) {
+  std::vector<int> order;
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    if (in_adjustment[c]) continue;
+    if (static_cast<int>(candidates[c].observations.size()) < options.min_landmark_observations) continue;
+    order.push_back(static_cast<int>(c));
+  }
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return candidates[a].observations.size() > candidates[b].observations.size();
+  });
+  const bool correct_depth = !depth_correction.IsIdentity();
+  struct Obs {
+    int slot, keypoint, camera;
+    Eigen::Vector2d px;
+    double depth;  // corrected, 0 without
+  };
+  std::vector<Obs> obs;
+  std::vector<const std::uint8_t*> descs;
+  int added = 0;
+  for (int c : order) {
+    if (added >= options.max_localization_landmarks) break;
+    obs.clear();
+    for (const auto& [s, i] : candidates[c].observations) {
+      if (s < 0 || s >= static_cast<int>(camera_slot.size()) || camera_slot[s] < 0) continue;
+      Obs o{s, i, camera_slot[s], frames[s].keypoint_px[i], frames[s].keypoints.depth_m[i]};
+      if (o.depth > 0 && correct_depth) {
+        o.depth = depth_correction.TrueDepth(o.depth, (o.px.x() - K.cx) / K.fx, (o.px.y() - K.cy) / K.fy);
+      }
+      obs.push_back(o);
+    }
+    if (static_cast<int>(obs.size()) < options.min_landmark_observations) continue;
+    // Start: the nearest observation with depth (its depth is the most precise).
+    int start = -1;
+    for (size_t k = 0; k < obs.size(); ++k) {
+      if (obs[k].depth > 0 && (start < 0 || obs[k].depth < obs[start].depth)) start = static_cast<int>(k);
+    }
+    if (start < 0) continue;
+    Eigen::Vector3d X = camera_from_room[obs[start].camera].Inverse() *
+                        K.Unproject(obs[start].px.x(), obs[start].px.y(), obs[start].depth);
+    std::vector<bool> inlier(obs.size(), true);
+    bool ok = true;
+    for (int pass = 0; pass < 2 && ok; ++pass) {
+      for (int it = 0; it < 5; ++it) {
+        Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d g = Eigen::Vector3d::Zero();
+        for (size_t k = 0; k < obs.size(); ++k) {
+          if (!inlier[k]) continue;
+          const Rigid3d& T = camera_from_room[obs[k].camera];
+          const Eigen::Matrix3d R = T.RotationMatrix();
+          const Eigen::Vector3d p = T * X;
+          if (p.z() < 0.05) continue;
+          const double iz = 1.0 / p.z();
+          Eigen::Matrix<double, 2, 3> J;
+          J << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz;
+          J = J * R;
+          const Eigen::Vector2d r(K.fx * p.x() * iz + K.cx - obs[k].px.x(), K.fy * p.y() * iz + K.cy - obs[k].px.y());
+          const double w = 1.0 / (options.keypoint_sigma_px * options.keypoint_sigma_px);
+          H += w * J.transpose() * J;
+          g += w * J.transpose() * r;
+          if (obs[k].depth > 0) {
+            const double sz = ba_options.DepthSigmaM(obs[k].depth);
+            const Eigen::RowVector3d Jz = R.row(2);
+            H += Jz.transpose() * Jz / (sz * sz);
+            g += Jz.transpose() * (p.z() - obs[k].depth) / (sz * sz);
+          }
+        }
+        const Eigen::Vector3d step = H.ldlt().solve(-g);
+        if (!step.allFinite()) {
+          ok = false;
+          break;
+        }
+        X += step;
+        if (step.norm() < 1e-6) break;
+      }
+      // Outliers as the adjustment drops them, then solve once more.
+      int n_in = 0;
+      for (size_t k = 0; k < obs.size(); ++k) {
+        const Eigen::Vector3d p = camera_from_room[obs[k].camera] * X;
+        if (p.z() < 0.05) {
+          ok = false;
+          break;
+        }
+        const double e = (K.Project(p) - obs[k].px).norm();
+        const bool z_ok = !(obs[k].depth > 0) ||
+                          std::abs(p.z() - obs[k].depth) < options.outlier_sigmas * ba_options.DepthSigmaM(obs[k].depth);
+        inlier[k] = e < options.outlier_sigmas * options.keypoint_sigma_px && z_ok;
+        n_in += inlier[k];
+      }
+      if (n_in < options.min_landmark_observations) ok = false;
+    }
+    if (!ok || !X.allFinite()) continue;
+    bool excluded = false;
+    for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(X);
+    if (excluded) continue;
+    descs.clear();
+    for (size_t k = 0; k < obs.size(); ++k) {
+      if (inlier[k]) descs.push_back(Descriptor(frames, obs[k].slot, obs[k].keypoint));
+    }
+    size_t best = 0;
+    int best_sum = INT32_MAX;
+    for (size_t a = 0; a < descs.size(); ++a) {
+      int sum = 0;
+      for (size_t b = 0; b < descs.size(); ++b) sum += HammingDistance32(descs[a], descs[b]);
+      if (sum < best_sum) {
+        best_sum = sum;
+        best = a;
+      }
+    }
+    map->landmarks_in_room.push_back(X);
+    cv::Mat row(1, kDescriptorBytes, CV_8UC1);
+    std::copy_n(descs[best], kDescriptorBytes, row.ptr<std::uint8_t>(0));
+    map->landmark_descriptors.push_back(row);
+    ++added;
+  }
+  report->localization_landmarks = added;
+}
+
 }  // namespace
 
 ExclusionBox CouchExclusionBox(const Rigid3d& room_from_model_target, double half_width_m,
@@ -157,8 +285,12 @@ std::string RoomMapBuildReport::ToText() const {
     for (int id : sparse_markers) out << " " << id;
     out << "\n";
   }
-  out << StringPrintf("landmarks: %d kept of %d candidates (%d in exclusion boxes), %d observations\n",
+  out << StringPrintf("landmarks: %d kept of %d candidates (%d in exclusion boxes), %d observations",
                       landmarks, landmark_candidates, landmarks_excluded, keypoint_observations);
+  if (localization_landmarks > 0) {
+    out << StringPrintf("; %d of them placed after the adjustment, for localisation only", localization_landmarks);
+  }
+  out << "\n";
   out << StringPrintf("residuals: marker corners %.3f px RMS, keypoints %.3f px RMS, keypoint depth %.2f mm RMS\n",
                       marker_rms_px, keypoint_rms_px, keypoint_depth_rms_m * 1000);
   out << StringPrintf("depth scale check (measured / map-predicted depth in markers): %.4f (MAD %.4f)\n",
@@ -719,6 +851,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       report.warnings.push_back(StringPrintf("%zu marker(s) could not be linked to the mapped ones; left out", still.size()));
     }
   }
+  std::vector<bool> in_adjustment(candidates.size(), false);
   if (options.use_keypoints) {
     report.landmark_candidates = static_cast<int>(candidates.size());
 
@@ -767,6 +900,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     // Landmarks and their observations for the adjustment.
     rebuild_cameras();
+    for (int c : kept) in_adjustment[c] = true;
     for (int c : kept) {
       const int landmark = static_cast<int>(landmarks.size());
       landmarks.push_back(candidates[c].Position());
@@ -1125,6 +1259,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
       if (!d.empty()) std::copy_n(d[best], kDescriptorBytes, map.landmark_descriptors.ptr<std::uint8_t>(static_cast<int>(l)));
     }
+  }
+  if (options.use_keypoints && options.max_localization_landmarks > 0) {
+    const auto t_more = Clock::now();
+    AddLocalizationLandmarks(candidates, in_adjustment, frames, camera_slot, ba.camera_from_room, K,
+                             result.map.depth_correction, joint_options, options, &map, &report);
+    report.landmarks_s += SecondsSince(t_more);
   }
   if (!report.sparse_markers.empty()) {
     report.warnings.push_back(StringPrintf("%zu marker(s) seen in fewer than %d views; left out of the map",

@@ -1,8 +1,11 @@
 // Camera localisation against the small case's map, and the CLI commands.
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+
+#include <iostream>
 
 #include <gtest/gtest.h>
 
@@ -71,6 +74,62 @@ TEST(Localizer, TrackingFramesWithinTolerance) {
 // Keypoints alone can agree on a wrong place (repeated texture); a
 // relocalised pose beyond a hand-held camera's reach from a pose moments
 // ago is refused, and accepted when enough time has passed.
+// Landmarks the adjustment's thinning leaves out are triangulated against
+// its cameras for localisation: keypoint-only localisation (markers off)
+// with an adjustment of only 100 landmarks, with and without them. Badly
+// placed extra landmarks would pull these poses off.
+TEST(Localizer, LandmarksPlacedAfterTheAdjustmentHelpKeypointOnlyFrames) {
+  const auto& c = GetSmallCase();
+  const Sequence room = Sequence::Open(c.folder.room_dir);
+  RoomMapBuildOptions build = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
+  build.max_landmarks = 100;
+  build.max_localization_landmarks = 0;
+  const RoomMapBuildResult few = BuildRoomMap(room, c.folder.config, build);
+  build.max_localization_landmarks = 12000;
+  const RoomMapBuildResult more = BuildRoomMap(room, c.folder.config, build);
+  EXPECT_EQ(few.map.num_landmarks(), 100);
+  EXPECT_EQ(few.report.localization_landmarks, 0);
+  EXPECT_GT(more.report.localization_landmarks, 100) << more.report.ToText();
+  EXPECT_EQ(more.map.num_landmarks(), 100 + more.report.localization_landmarks);
+  EXPECT_EQ(more.map.landmark_descriptors.rows, more.map.num_landmarks());
+  // The adjustment itself is unchanged: the same first 100 landmarks.
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_LT((more.map.landmarks_in_room[i] - few.map.landmarks_in_room[i]).norm(), 1e-9) << "landmark " << i;
+  }
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  auto localise = [&](const RoomMap& map, double* mean_mm, double* max_mm) {
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+    options.use_markers = false;
+    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    int ok = 0;
+    *mean_mm = 0;
+    *max_mm = 0;
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+      if (!r.ok) continue;
+      const double e = ComputePoseError(gt[i].room_from_x, r.room_from_camera).translation_mm;
+      *mean_mm += e;
+      *max_mm = std::max(*max_mm, e);
+      ++ok;
+    }
+    if (ok) *mean_mm /= ok;
+    return ok;
+  };
+  double few_mean = 0, few_max = 0, more_mean = 0, more_max = 0;
+  const int few_ok = localise(few.map, &few_mean, &few_max);
+  const int more_ok = localise(more.map, &more_mean, &more_max);
+  std::cout << "keypoint-only: 100 landmarks " << few_ok << " frames, " << few_mean << " mm mean, " << few_max
+            << " max; with " << more.map.num_landmarks() << ": " << more_ok << " frames, " << more_mean << " mm mean, "
+            << more_max << " max\n";
+  EXPECT_EQ(more_ok, static_cast<int>(seq.size()));
+  EXPECT_GE(more_ok, few_ok);
+  EXPECT_LT(more_mean, 6.0);
+  EXPECT_LT(more_max, 15.0);
+  if (few_ok == more_ok) EXPECT_LT(more_mean, few_mean);
+}
+
 TEST(Localizer, KeypointRelocalisationBeyondReachOfARecentPoseIsRefused) {
   const auto& c = GetSmallCase();
   const CameraIntrinsics& K = c.folder.config.camera;

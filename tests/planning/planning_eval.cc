@@ -85,6 +85,7 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
     if (std::getenv("NO_DEPTH_CHECK")) build_options.estimate_depth_correction = false;
     if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
+    if (const char* v = std::getenv("LOC_LM")) build_options.max_localization_landmarks = std::atoi(v);
     RoomMapBuildResult build;
     if (!store.empty()) {
       auto db = SqliteDatabase::Open(store);
@@ -180,6 +181,10 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("CORNER_FLOOR")) options.marker_corner_sigma_px = std::atof(v);
     if (const char* v = std::getenv("RELOC_SIGMA_M")) options.max_relocalisation_position_sigma_m = std::atof(v);
     if (const char* v = std::getenv("MAX_SIGMA_M")) options.max_position_sigma_m = std::atof(v);
+    if (const char* v = std::getenv("MAX_EDGE_PX")) options.detector.edge.max_pixels_per_edge = std::atoi(v);
+    if (const char* v = std::getenv("BAND_PX")) options.detector.edge.band_half_width_px = std::atof(v);
+    if (const char* v = std::getenv("ACCEL")) options.motion_accel_m_s2 = std::atof(v);
+    if (const char* v = std::getenv("ANG_ACCEL")) options.motion_angular_accel_rad_s2 = std::atof(v);
     if (depth_quad >= 0) options.depth_sigma_quad_per_m = depth_quad;
     if (depth_const >= 0) options.depth_sigma_const_m = depth_const;
     std::vector<std::pair<std::string, std::filesystem::path>> sequences = {{"room", folder.room_dir},
@@ -206,6 +211,22 @@ int main(int argc, char** argv) {
         const RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
         const LocalizationResult r = localizer.Localize(frame);
         if (r.ok) est.push_back({frame.timestamp_s, r.room_from_camera});
+        const auto frame_truth = std::getenv("FRAME_LOC") ? seq.CameraGroundTruth() : std::nullopt;
+        if (frame_truth) {
+          // One line a frame: markers (id:side px), keypoints, sigmas, isocentre transfer error.
+          std::string ids;
+          for (const auto& o : r.markers) ids += StringPrintf(" %d:%.0f", o.id, o.MeanSidePx());
+          double iso_err = -1;
+          for (const auto& g : *frame_truth) {
+            if (r.ok && std::abs(g.timestamp_s - frame.timestamp_s) < 1e-4) {
+              iso_err = (r.room_from_camera * (g.room_from_x.Inverse() * truth.isocentre_in_room_m) -
+                         truth.isocentre_in_room_m).norm() * 1000;
+            }
+          }
+          std::cout << StringPrintf("    f%03zu %-11s m%d k%3d sig %.2fmm %.3fdeg iso %.2f [%s ]\n", i,
+                                    LocalizationStatusName(r.status), r.markers_used, r.keypoints_used,
+                                    r.position_sigma_mm, r.rotation_sigma_deg, iso_err, ids.c_str());
+        }
         if (!r.ok) {
           ++lost;
           bool marker = false;
