@@ -108,6 +108,11 @@ struct CameraLocalizerOptions {
   double max_camera_turn_deg_s = 60;
   double max_camera_turn_margin_deg = 5;
   double wide_search_radius_px = 50;
+  /// A tracked keypoint-only pose on fewer inliers than this fraction of the
+  /// last frame's is checked by the wide search from the last pose; the
+  /// pose more keypoints agree on is kept (0: never; 1: whenever the
+  /// support drops, about every other keypoint-only frame, +0.5-1 ms).
+  double weak_tracking_fraction = 1.0;
   /// ... then by brute-force matching against the map's first landmarks
   /// (the adjusted ones, spread over the room: RoomMap), at most this many:
   /// matching every keypoint against all of a map's 12000+ landmarks took

@@ -185,6 +185,7 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("BAND_PX")) options.detector.edge.band_half_width_px = std::atof(v);
     if (const char* v = std::getenv("ACCEL")) options.motion_accel_m_s2 = std::atof(v);
     if (const char* v = std::getenv("ANG_ACCEL")) options.motion_angular_accel_rad_s2 = std::atof(v);
+    if (const char* v = std::getenv("WEAK")) options.weak_tracking_fraction = std::atof(v);
     if (depth_quad >= 0) options.depth_sigma_quad_per_m = depth_quad;
     if (depth_const >= 0) options.depth_sigma_const_m = depth_const;
     std::vector<std::pair<std::string, std::filesystem::path>> sequences = {{"room", folder.room_dir},
