@@ -41,6 +41,9 @@ std::string BodyTrackerOptions::Validate() const {
   if (!(detection_side_px >= 8)) return "detection_side_px must be at least 8";
   if (!(min_sticker_side_px >= 3)) return "min_sticker_side_px must be at least 3";
   if (!(start_depth_weight_px >= 0)) return "start_depth_weight_px must not be negative";
+  if (!(hint_search_step_mm > 0) || hint_search_steps < 0 || hint_search_steps > 10) {
+    return "hint_search_step_mm must be positive and hint_search_steps in 0..10";
+  }
   if (!(max_refinement_shift_px > 0) || !(max_refinement_shift_fraction >= 0)) {
     return "max_refinement_shift_px must be positive and max_refinement_shift_fraction not negative";
   }
@@ -653,6 +656,26 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
     }
     std::vector<MarkerObservation> at_pose;
     m.RefineAtPose(pose, have, o, &at_pose);
+    if (at_pose.empty() && carried && from_hint && o.hint_search_steps > 0) {
+      // From a hint the surface alone places the patient to a few mm along
+      // the body (measured: stickers of 12 px not refined for the first 10
+      // frames of a sequence, the patient reported lost): the stickers where
+      // the fitted pose, shifted across the view, puts them.
+      std::vector<MarkerObservation> shifted;
+      const Rigid3d fitted = pose;
+      for (int iy = -o.hint_search_steps; iy <= o.hint_search_steps; ++iy) {
+        for (int ix = -o.hint_search_steps; ix <= o.hint_search_steps; ++ix) {
+          if (ix == 0 && iy == 0) continue;
+          const Rigid3d shift(Eigen::Quaterniond::Identity(),
+                              Eigen::Vector3d(ix, iy, 0) * (o.hint_search_step_mm / 1000.0));
+          m.RefineAtPose(shift * fitted, have, o, &shifted);
+          if (shifted.size() >= 2 && shifted.size() > at_pose.size()) {
+            at_pose = shifted;
+            pose = shift * fitted;
+          }
+        }
+      }
+    }
     std::vector<SeenSticker> extra = make_stickers(at_pose);
     if (!extra.empty()) {
       result.stickers_refined_at_pose = static_cast<int>(extra.size());

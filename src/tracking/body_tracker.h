@@ -90,6 +90,14 @@ struct BodyTrackerOptions {
   /// max(px, fraction * side) from the projection.
   double max_refinement_shift_px = 1.5;
   double max_refinement_shift_fraction = 0.12;
+  /// Starting from a hint (no sticker read, no recent pose), the surface
+  /// fit leaves the pose free to slide along the body by a few mm, beyond
+  /// the refinement's reach on 10-15 px stickers: the stickers are then
+  /// refined at the fitted pose shifted across the view by every offset of
+  /// a grid of this step (mm) and half-width (steps), and the shift that
+  /// refines the most (at least 2) is kept. 0 steps: off.
+  double hint_search_step_mm = 2.0;
+  int hint_search_steps = 3;
 
   /// A sticker whose corner RMS exceeds this after the fit is dropped.
   double max_sticker_rms_px = 1.2;
