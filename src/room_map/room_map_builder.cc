@@ -70,6 +70,22 @@ const std::uint8_t* Descriptor(const std::vector<FrameData>& frames, int slot, i
   return frames[slot].keypoints.descriptors.ptr<std::uint8_t>(kp);
 }
 
+// The medoid of a landmark's descriptors (least summed Hamming distance to
+// the others); null for none.
+const std::uint8_t* MedoidDescriptor(const std::vector<const std::uint8_t*>& descs) {
+  const std::uint8_t* best = nullptr;
+  int best_sum = INT32_MAX;
+  for (const std::uint8_t* a : descs) {
+    int sum = 0;
+    for (const std::uint8_t* b : descs) sum += HammingDistance32(a, b);
+    if (sum < best_sum) {
+      best_sum = sum;
+      best = a;
+    }
+  }
+  return best;
+}
+
 // The candidates the thinning left out, triangulated against the adjusted
 // cameras (held fixed) and appended to the map for localisation only: each
 // point starts from its best-depth observation, Gauss-Newton on reprojection
@@ -179,19 +195,9 @@ void AddLocalizationLandmarks(const std::vector<Candidate>& candidates, const st
     for (size_t k = 0; k < obs.size(); ++k) {
       if (inlier[k]) descs.push_back(Descriptor(frames, obs[k].slot, obs[k].keypoint));
     }
-    size_t best = 0;
-    int best_sum = INT32_MAX;
-    for (size_t a = 0; a < descs.size(); ++a) {
-      int sum = 0;
-      for (size_t b = 0; b < descs.size(); ++b) sum += HammingDistance32(descs[a], descs[b]);
-      if (sum < best_sum) {
-        best_sum = sum;
-        best = a;
-      }
-    }
     map->landmarks_in_room.push_back(X);
     cv::Mat row(1, kDescriptorBytes, CV_8UC1);
-    std::copy_n(descs[best], kDescriptorBytes, row.ptr<std::uint8_t>(0));
+    std::copy_n(MedoidDescriptor(descs), kDescriptorBytes, row.ptr<std::uint8_t>(0));
     map->landmark_descriptors.push_back(row);
     ++added;
   }
@@ -1246,18 +1252,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     map.landmarks_in_room = ba.landmarks_in_room;
     map.landmark_descriptors.create(static_cast<int>(ba.landmarks_in_room.size()), kDescriptorBytes, CV_8UC1);
     for (size_t l = 0; l < descs.size(); ++l) {
-      const auto& d = descs[l];
-      size_t best = 0;
-      int best_sum = INT32_MAX;
-      for (size_t a = 0; a < d.size(); ++a) {
-        int sum = 0;
-        for (size_t b = 0; b < d.size(); ++b) sum += HammingDistance32(d[a], d[b]);
-        if (sum < best_sum) {
-          best_sum = sum;
-          best = a;
-        }
+      if (const std::uint8_t* d = MedoidDescriptor(descs[l])) {
+        std::copy_n(d, kDescriptorBytes, map.landmark_descriptors.ptr<std::uint8_t>(static_cast<int>(l)));
       }
-      if (!d.empty()) std::copy_n(d[best], kDescriptorBytes, map.landmark_descriptors.ptr<std::uint8_t>(static_cast<int>(l)));
     }
   }
   if (options.use_keypoints && options.max_localization_landmarks > 0) {
