@@ -861,13 +861,18 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   if (options.use_keypoints) {
     report.landmark_candidates = static_cast<int>(candidates.size());
 
-    // Selection: seen often enough, outside the exclusion boxes, spread over voxels.
+    // Selection: seen often enough, outside the exclusion boxes, spread over
+    // voxels. The candidates are in the root marker's frame: the boxes (room
+    // frame) are tested here only when that is the origin's, else on the
+    // adjusted landmarks in the room frame (below).
     std::vector<int> kept;
     for (size_t c = 0; c < candidates.size(); ++c) {
       if (static_cast<int>(candidates[c].observations.size()) < options.min_landmark_observations) continue;
       const Eigen::Vector3d X = candidates[c].Position();
       bool excluded = false;
-      for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(X);
+      if (root_id == origin_id) {
+        for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(X);
+      }
       if (excluded) {
         ++report.landmarks_excluded;
         continue;
@@ -1255,6 +1260,26 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       if (const std::uint8_t* d = MedoidDescriptor(descs[l])) {
         std::copy_n(d, kDescriptorBytes, map.landmark_descriptors.ptr<std::uint8_t>(static_cast<int>(l)));
       }
+    }
+    if (root_id != origin_id && !options.exclude_landmarks.empty()) {
+      // The exclusion boxes in the room frame, now that the landmarks are in
+      // it (the selection saw them in the root marker's frame). They took
+      // part in the adjustment (the couch top stands still while the room is
+      // recorded); the map leaves them out.
+      std::vector<Eigen::Vector3d> outside;
+      cv::Mat rows;
+      for (size_t l = 0; l < map.landmarks_in_room.size(); ++l) {
+        bool excluded = false;
+        for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(map.landmarks_in_room[l]);
+        if (excluded) {
+          ++report.landmarks_excluded;
+          continue;
+        }
+        outside.push_back(map.landmarks_in_room[l]);
+        rows.push_back(map.landmark_descriptors.row(static_cast<int>(l)));
+      }
+      map.landmarks_in_room = std::move(outside);
+      map.landmark_descriptors = rows;
     }
   }
   if (options.use_keypoints && options.max_localization_landmarks > 0) {
