@@ -158,6 +158,48 @@ std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth, const std::arra
   return samples;
 }
 
+std::vector<DepthSample> SampleSupportDepth(const cv::Mat& depth, const std::array<Eigen::Vector2d, 4>& corners_image_px,
+                                            const CameraIntrinsics& k, double marker_side_m, double half_width_m,
+                                            int max_samples) {
+  std::vector<DepthSample> samples;
+  if (depth.empty() || max_samples <= 0 || !(marker_side_m > 0) || !(half_width_m > 0)) return samples;
+  ARPOS_CHECK(depth.type() == CV_16UC1, "depth must be CV_16UC1");
+  const float h = static_cast<float>(marker_side_m / 2);
+  const std::vector<cv::Point2f> square = {{-h, h}, {h, h}, {h, -h}, {-h, -h}};
+  std::vector<cv::Point2f> quad;
+  for (const auto& c : corners_image_px) quad.emplace_back(static_cast<float>(c.x()), static_cast<float>(c.y()));
+  const cv::Matx33d H = cv::getPerspectiveTransform(square, quad);
+  // Points behind the camera map with the other sign of w than the centre.
+  const double w_centre = (H * cv::Vec3d(0, 0, 1))[2];
+  const int n = std::max(2, static_cast<int>(std::floor(std::sqrt(double(max_samples)))));
+  std::vector<cv::Point2d> px;
+  std::vector<float> z;
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      const double x = half_width_m * (-1 + 2 * (i + 0.5) / n), y = half_width_m * (-1 + 2 * (j + 0.5) / n);
+      const cv::Vec3d q = H * cv::Vec3d(x, y, 1);
+      if (!(q[2] * w_centre > 0)) continue;
+      const double uf = q[0] / q[2], vf = q[1] / q[2];
+      if (!(uf >= 0 && vf >= 0 && uf < depth.cols - 0.5 && vf < depth.rows - 0.5)) continue;
+      const int u = cvRound(uf), v = cvRound(vf);
+      const uint16_t d = depth.at<uint16_t>(v, u);
+      if (d == 0) continue;
+      px.emplace_back(u, v);
+      z.push_back(static_cast<float>(d / k.depth_scale));
+    }
+  }
+  if (k.HasDistortion() && !px.empty()) {
+    std::vector<cv::Point2d> ideal;
+    cv::undistortPoints(px, ideal, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
+    px = ideal;
+  }
+  samples.reserve(px.size());
+  for (size_t i = 0; i < px.size(); ++i) {
+    samples.push_back({Eigen::Vector2f(static_cast<float>(px[i].x), static_cast<float>(px[i].y)), z[i]});
+  }
+  return samples;
+}
+
 BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
   ARPOS_CHECK(problem != nullptr, "no problem given");
   std::string reason;

@@ -41,6 +41,17 @@ std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth,
                                            const std::array<Eigen::Vector2d, 4>& corners_image_px,
                                            const CameraIntrinsics& intrinsics, int max_samples);
 
+/// Depth pixels on the plane a marker lies on, around it: a grid over the
+/// square of half-width `half_width_m` (metres, marker plane) about the
+/// marker's centre, mapped through the homography of its corners (side
+/// `marker_side_m`), at most `max_samples`, ideal pixels. For the support
+/// plane (floor or wall) of the origin marker: its depth fixes the plane's
+/// tilt far better than the marker's own few pixels.
+std::vector<DepthSample> SampleSupportDepth(const cv::Mat& depth,
+                                            const std::array<Eigen::Vector2d, 4>& corners_image_px,
+                                            const CameraIntrinsics& intrinsics, double marker_side_m,
+                                            double half_width_m, int max_samples);
+
 struct BaMarkerObservation {
   int camera = -1;  ///< index into BaProblem::camera_from_room
   int marker = -1;  ///< index into BaProblem::room_from_marker

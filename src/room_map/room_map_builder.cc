@@ -37,6 +37,7 @@ struct FrameData {
   std::vector<MarkerObservation> markers;  // kRefined room markers, corners undistorted
   std::vector<MarkerPose> poses;           // parallel
   std::vector<std::vector<DepthSample>> depth_samples;  // parallel
+  std::vector<std::vector<DepthSample>> support_samples;  // parallel; the origin's only
   std::vector<int> all_ids_seen;           // every room id detected, refined or not
   KeypointSet keypoints;
   std::vector<Eigen::Vector2d> keypoint_px;  // undistorted
@@ -84,6 +85,135 @@ const std::uint8_t* MedoidDescriptor(const std::vector<const std::uint8_t*>& des
     }
   }
   return best;
+}
+
+// A plane's tilt about the origin's centre, in the origin marker's frame:
+// z = a x + b y + c, as the rotation of z onto its normal,
+// omega = z x (-a, -b, 1) = (b, -a), with its covariance.
+struct TiltEstimate {
+  Eigen::Vector2d omega = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Identity();
+};
+
+// Points on the origin's support plane, one view's worth: origin frame,
+// with the depth noise along the plane's normal (1 sigma).
+struct SupportView {
+  std::vector<Eigen::Vector3d> points;
+  std::vector<double> sigma_m;
+};
+
+struct SupportPlaneFit {
+  bool ok = false;
+  TiltEstimate tilt;
+  int views = 0, points = 0;
+};
+
+// Robust weighted fit of z = a x + b y + c to every view's points (Tukey
+// weights on residuals over sigma times a robust scale, from the plane
+// z = 0), then the same fit per view: the tilt's covariance is the pooled
+// fit's, scaled up to the spread between views when that is larger (depth
+// bias that differs between viewpoints, camera pose errors), and never
+// below `floor_sigma_rad` over the square root of the views.
+SupportPlaneFit FitSupportPlane(const std::vector<SupportView>& views, double half_width_m,
+                                double floor_sigma_rad) {
+  SupportPlaneFit fit;
+  struct P {
+    Eigen::Vector3d p;
+    double sigma;
+    int view;
+  };
+  std::vector<P> pts;
+  for (size_t v = 0; v < views.size(); ++v) {
+    for (size_t i = 0; i < views[v].points.size(); ++i) {
+      const Eigen::Vector3d& p = views[v].points[i];
+      if (std::abs(p.x()) > half_width_m || std::abs(p.y()) > half_width_m) continue;
+      if (!(views[v].sigma_m[i] > 0) || !p.allFinite()) continue;
+      if (std::abs(p.z()) > std::max(4 * views[v].sigma_m[i], 0.03)) continue;  // off the plane
+      pts.push_back({p, views[v].sigma_m[i], static_cast<int>(v)});
+    }
+  }
+  if (pts.size() < 200) return fit;
+  Eigen::Vector3d abc = Eigen::Vector3d::Zero();
+  std::vector<double> w(pts.size(), 1.0);
+  double scale = 1;
+  auto solve = [&](int view, Eigen::Matrix3d* info_out) {
+    Eigen::Matrix3d info = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+    for (size_t i = 0; i < pts.size(); ++i) {
+      if (view >= 0 && pts[i].view != view) continue;
+      if (w[i] <= 0) continue;
+      const Eigen::Vector3d row(pts[i].p.x(), pts[i].p.y(), 1);
+      const double wi = w[i] / (pts[i].sigma * pts[i].sigma * scale * scale);
+      info.noalias() += wi * row * row.transpose();
+      rhs.noalias() += wi * row * pts[i].p.z();
+    }
+    if (info_out) *info_out = info;
+    return Eigen::Vector3d(info.ldlt().solve(rhs));
+  };
+  Eigen::Matrix3d info;
+  for (int iteration = 0; iteration < 6; ++iteration) {
+    abc = solve(-1, &info);
+    std::vector<double> r(pts.size());
+    for (size_t i = 0; i < pts.size(); ++i) {
+      r[i] = std::abs(pts[i].p.z() - abc.dot(Eigen::Vector3d(pts[i].p.x(), pts[i].p.y(), 1))) / pts[i].sigma;
+    }
+    std::vector<double> sorted = r;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    scale = std::max(0.5, 1.4826 * sorted[sorted.size() / 2]);
+    for (size_t i = 0; i < pts.size(); ++i) {
+      const double u = r[i] / (4.685 * scale);
+      w[i] = u < 1 ? (1 - u * u) * (1 - u * u) : 0;
+    }
+  }
+  abc = solve(-1, &info);
+  // Spread in x and y: the slopes need the plane seen across, not along a line.
+  Eigen::Matrix2d spread = Eigen::Matrix2d::Zero();
+  double wsum = 0;
+  int used = 0;
+  std::vector<int> per_view(views.size(), 0);
+  for (size_t i = 0; i < pts.size(); ++i) {
+    if (w[i] <= 0) continue;
+    spread += w[i] * pts[i].p.head<2>() * pts[i].p.head<2>().transpose();
+    wsum += w[i];
+    ++used;
+    ++per_view[pts[i].view];
+  }
+  if (used < 200 || !(wsum > 0)) return fit;
+  spread /= wsum;
+  const double min_spread = 0.15 * half_width_m;
+  if (!(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(spread).eigenvalues().minCoeff() > min_spread * min_spread)) {
+    return fit;
+  }
+  const Eigen::Matrix3d cov3 = info.inverse();
+  Eigen::Matrix2d cov = cov3.topLeftCorner<2, 2>();
+  // Between views.
+  std::vector<Eigen::Vector2d> slopes;
+  for (size_t v = 0; v < views.size(); ++v) {
+    if (per_view[v] < 100) continue;
+    Eigen::Matrix3d view_info;
+    const Eigen::Vector3d view_abc = solve(static_cast<int>(v), &view_info);
+    if (view_abc.allFinite() && view_info.determinant() > 0) slopes.push_back(view_abc.head<2>());
+  }
+  fit.views = static_cast<int>(slopes.size());
+  if (slopes.size() >= 3) {
+    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+    for (const auto& sl : slopes) mean += sl;
+    mean /= slopes.size();
+    Eigen::Matrix2d between = Eigen::Matrix2d::Zero();
+    for (const auto& sl : slopes) between += (sl - mean) * (sl - mean).transpose();
+    between /= static_cast<double>((slopes.size() - 1) * slopes.size());
+    const double k2 = between.trace() / cov.trace();
+    if (k2 > 1) cov *= k2;
+  }
+  const double floor2 = floor_sigma_rad * floor_sigma_rad / std::max(1, fit.views);
+  cov += Eigen::Matrix2d::Identity() * floor2;
+  Eigen::Matrix2d flip;
+  flip << 0, 1, -1, 0;
+  fit.tilt.omega = Eigen::Vector2d(abc.y(), -abc.x());
+  fit.tilt.cov = flip * cov * flip.transpose();
+  fit.points = used;
+  fit.ok = fit.tilt.omega.allFinite() && fit.tilt.cov.allFinite() && fit.views >= 1;
+  return fit;
 }
 
 // The candidates the thinning left out, triangulated against the adjusted
@@ -230,6 +360,9 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (!(marker_reference_cell_px >= 0)) out << "marker_reference_cell_px must not be negative";
   else if (!(max_marker_view_rms_px > 0)) out << "max_marker_view_rms_px must be positive";
   else if (marker_depth_samples < 0) out << "marker_depth_samples must not be negative";
+  else if (support_plane_samples < 0) out << "support_plane_samples must not be negative";
+  else if (!(support_plane_half_width_m > 0)) out << "support_plane_half_width_m must be positive";
+  else if (!(support_plane_min_sigma_deg >= 0)) out << "support_plane_min_sigma_deg must not be negative";
   else if (min_marker_observations < 1) out << "min_marker_observations must be at least 1";
   else if (!(association_radius_px > 0)) out << "association_radius_px must be positive";
   else if (max_hamming < 1 || max_hamming > 256) out << "max_hamming must be in 1..256";
@@ -311,10 +444,15 @@ std::string RoomMapBuildReport::ToText() const {
       "%.3f mm (1 sigma)",
       origin_observations, room_frame_tilt_sigma_deg, room_frame_yaw_sigma_deg,
       room_frame_couch_sigma_mm);
-  if (coplanar_markers > 0) {
-    out << StringPrintf("; tilt from the origin's views and the plane of %d markers coplanar with it "
-                        "(turned %.3f deg)",
-                        coplanar_markers, coplanar_turn_deg);
+  if (coplanar_markers > 0 || support_plane_views > 0) {
+    out << "; tilt from the origin's views";
+    if (coplanar_markers > 0) out << StringPrintf(", the plane of %d markers coplanar with it", coplanar_markers);
+    if (support_plane_views > 0) {
+      out << StringPrintf(", its support plane in depth (%d views, %d points; %.4f deg 1 sigma, %.3f deg from the origin's own)",
+                          support_plane_views, support_plane_points, support_plane_tilt_sigma_deg,
+                          support_plane_offset_deg);
+    }
+    out << StringPrintf(" (turned %.3f deg)", room_frame_turn_deg);
   }
   out << "\n";
   if (!camera_response.empty()) out << camera_response << "\n";
@@ -397,6 +535,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
             f.markers.push_back(ideal);
             f.poses.push_back(pose);
             f.depth_samples.push_back(std::move(samples));
+            f.support_samples.emplace_back();
+            if (obs.id == origin_id && options.use_support_plane) {
+              f.support_samples.back() =
+                  SampleSupportDepth(frame.depth, obs.corners_px, K, marker_size,
+                                     options.support_plane_half_width_m, options.support_plane_samples);
+            }
           }
           if (options.use_keypoints) {
             extractor.Extract(gray, frame.depth, K.depth_scale, &f.keypoints);
@@ -1127,44 +1271,101 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       report.room_frame_couch_sigma_mm = report.RoomFramePositionSigmaMm(options.couch_point_in_room);
     }
     // Markers coplanar with the origin (the floor, or the wall it is on)
-    // constrain its tilt too: their centres, spread over metres, fix the
-    // plane's tilt far better than a small, rarely seen origin's own views.
-    // Fused by inverse variance (floor flatness allowed for) when the
-    // origin's own tilt is weaker than the tolerance; the room frame turns
-    // onto the fused plane about the origin's centre.
-    if (options.use_coplanar_markers && report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg &&
+    // and that plane as depth sees it around the origin constrain its tilt
+    // too: the markers' centres spread over metres, the depth over a metre
+    // square in every view of the origin, fix the plane's tilt far better
+    // than a small, rarely seen origin's own corners. Fused by inverse
+    // variance when the origin's own tilt is weaker than the tolerance;
+    // the room frame turns onto the fused plane about the origin's centre.
+    if (report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg &&
         std::isfinite(report.room_frame_tilt_sigma_deg)) {
       const Rigid3d origin_from_room = ba.room_from_marker[slot].Inverse();
-      std::vector<Eigen::Vector3d> centres;
-      for (size_t m = 0; m < ba.room_from_marker.size(); ++m) {
-        if (static_cast<int>(m) == slot) continue;
-        const Rigid3d origin_from_marker = origin_from_room * ba.room_from_marker[m];
-        const Eigen::Vector3d normal = origin_from_marker.rotation * Eigen::Vector3d::UnitZ();
-        const Eigen::Vector3d c = origin_from_marker.translation;
-        if (normal.z() > std::cos(5 * M_PI / 180) && std::abs(c.z()) < 0.03) centres.push_back(c);
+      std::vector<TiltEstimate> estimates;
+      TiltEstimate own;
+      own.cov = report.room_frame_covariance.topLeftCorner<2, 2>();
+      estimates.push_back(own);
+      if (options.use_coplanar_markers) {
+        std::vector<Eigen::Vector3d> centres;
+        for (size_t m = 0; m < ba.room_from_marker.size(); ++m) {
+          if (static_cast<int>(m) == slot) continue;
+          const Rigid3d origin_from_marker = origin_from_room * ba.room_from_marker[m];
+          const Eigen::Vector3d normal = origin_from_marker.rotation * Eigen::Vector3d::UnitZ();
+          const Eigen::Vector3d c = origin_from_marker.translation;
+          if (normal.z() > std::cos(5 * M_PI / 180) && std::abs(c.z()) < 0.03) centres.push_back(c);
+        }
+        Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
+        Eigen::Vector2d atb = Eigen::Vector2d::Zero();
+        for (const Eigen::Vector3d& c : centres) {
+          ata += c.head<2>() * c.head<2>().transpose();
+          atb += c.head<2>() * c.z();
+        }
+        if (centres.size() >= 2 && ata.determinant() > 0.25) {  // spread over ~1 m in both directions
+          const Eigen::Vector2d slope = ata.ldlt().solve(atb);  // z = a x + b y
+          double rss = 0;
+          for (const Eigen::Vector3d& c : centres) rss += std::pow(c.z() - slope.dot(c.head<2>()), 2);
+          const double flat_sigma = std::max(options.coplanar_flatness_m,
+                                             std::sqrt(rss / std::max<double>(1, centres.size() - 2)));
+          const Eigen::Matrix2d slope_cov = ata.inverse() * flat_sigma * flat_sigma;
+          Eigen::Matrix2d flip;
+          flip << 0, 1, -1, 0;
+          TiltEstimate plane;
+          plane.omega = Eigen::Vector2d(slope.y(), -slope.x());
+          plane.cov = flip * slope_cov * flip.transpose();
+          if (plane.omega.allFinite() && plane.cov.allFinite()) {
+            estimates.push_back(plane);
+            report.coplanar_markers = static_cast<int>(centres.size());
+          }
+        }
       }
-      Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
-      Eigen::Vector2d atb = Eigen::Vector2d::Zero();
-      for (const Eigen::Vector3d& c : centres) {
-        ata += c.head<2>() * c.head<2>().transpose();
-        atb += c.head<2>() * c.z();
+      if (options.use_support_plane) {
+        const Eigen::Vector3d z_axis = Eigen::Vector3d::UnitZ();
+        std::vector<SupportView> views;
+        for (size_t s = 0; s < frames.size(); ++s) {
+          if (camera_slot[s] < 0) continue;
+          const FrameData& f = frames[s];
+          const Rigid3d origin_from_camera = origin_from_room * ba.camera_from_room[camera_slot[s]].Inverse();
+          const Eigen::Vector3d centre = origin_from_camera.translation;
+          for (size_t m = 0; m < f.markers.size(); ++m) {
+            if (f.markers[m].id != origin_id || f.support_samples[m].empty()) continue;
+            SupportView view;
+            for (const DepthSample& sample : f.support_samples[m]) {
+              double z = sample.depth_m;
+              if (!(z > 0)) continue;
+              const Eigen::Vector2d xy((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy);
+              if (!result.map.depth_correction.IsIdentity()) {
+                z = result.map.depth_correction.TrueDepth(z, xy.x(), xy.y());
+              }
+              const Eigen::Vector3d p = origin_from_camera * Eigen::Vector3d(xy.x() * z, xy.y() * z, z);
+              const double along = std::abs((p - centre).normalized().dot(z_axis));
+              if (along < 0.2) continue;  // grazing
+              view.points.push_back(p);
+              view.sigma_m.push_back(joint_options.DepthSigmaM(z) * along);
+            }
+            views.push_back(std::move(view));
+          }
+        }
+        const SupportPlaneFit plane = FitSupportPlane(views, options.support_plane_half_width_m,
+                                                      options.support_plane_min_sigma_deg * M_PI / 180);
+        if (plane.ok) {
+          estimates.push_back(plane.tilt);
+          report.support_plane_views = plane.views;
+          report.support_plane_points = plane.points;
+          report.support_plane_tilt_sigma_deg =
+              std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d>(plane.tilt.cov).eigenvalues().maxCoeff()) *
+              180 / M_PI;
+          report.support_plane_offset_deg = plane.tilt.omega.norm() * 180 / M_PI;
+        }
       }
-      if (centres.size() >= 2 && ata.determinant() > 0.25) {  // spread over ~1 m in both directions
-        const Eigen::Vector2d slope = ata.ldlt().solve(atb);  // z = a x + b y
-        double rss = 0;
-        for (const Eigen::Vector3d& c : centres) rss += std::pow(c.z() - slope.dot(c.head<2>()), 2);
-        const double flat_sigma = std::max(options.coplanar_flatness_m,
-                                           std::sqrt(rss / std::max<double>(1, centres.size() - 2)));
-        const Eigen::Matrix2d slope_cov = ata.inverse() * flat_sigma * flat_sigma;
-        // The plane's normal as a rotation of z: omega = z x (-a, -b, 1) = (b, -a).
-        const Eigen::Vector2d omega_plane(slope.y(), -slope.x());
-        Eigen::Matrix2d flip;
-        flip << 0, 1, -1, 0;
-        const Eigen::Matrix2d plane_cov = flip * slope_cov * flip.transpose();
-        const Eigen::Matrix2d own_cov = report.room_frame_covariance.topLeftCorner<2, 2>();
-        const Eigen::Matrix2d fused_info = own_cov.inverse() + plane_cov.inverse();
+      if (estimates.size() > 1) {
+        Eigen::Matrix2d fused_info = Eigen::Matrix2d::Zero();
+        Eigen::Vector2d info_omega = Eigen::Vector2d::Zero();
+        for (const TiltEstimate& e : estimates) {
+          const Eigen::Matrix2d inv = e.cov.inverse();
+          fused_info += inv;
+          info_omega += inv * e.omega;
+        }
         const Eigen::Matrix2d fused_cov = fused_info.inverse();
-        const Eigen::Vector2d omega = fused_cov * plane_cov.inverse() * omega_plane;
+        const Eigen::Vector2d omega = fused_cov * info_omega;
         if (omega.allFinite() && fused_cov.allFinite()) {
           // New room frame = the origin frame turned by omega about its centre.
           const Rigid3d turned = Rigid3d::FromRotationVector(Eigen::Vector3d(omega.x(), omega.y(), 0),
@@ -1183,8 +1384,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
           const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> tilt(fused_cov);
           report.room_frame_tilt_sigma_deg = std::sqrt(std::max(0.0, tilt.eigenvalues().maxCoeff())) * 180 / M_PI;
           report.room_frame_couch_sigma_mm = report.RoomFramePositionSigmaMm(options.couch_point_in_room);
-          report.coplanar_markers = static_cast<int>(centres.size());
-          report.coplanar_turn_deg = omega.norm() * 180 / M_PI;
+          report.room_frame_turn_deg = omega.norm() * 180 / M_PI;
+          if (report.coplanar_markers > 0) report.coplanar_turn_deg = report.room_frame_turn_deg;
         }
       }
     }

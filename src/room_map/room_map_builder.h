@@ -131,6 +131,22 @@ struct RoomMapBuildOptions {
   /// much unflatness of the floor or wall (m, 1 sigma).
   bool use_coplanar_markers = true;
   double coplanar_flatness_m = 0.002;
+  /// And the plane the origin lies on as depth sees it around it (the floor
+  /// or the wall): depth on a grid of at most `support_plane_samples` over
+  /// +-`support_plane_half_width_m` about the origin in each view of it,
+  /// placed by the adjusted cameras, fitted robustly; its tilt uncertainty
+  /// is the larger of the fit's and the spread between views. Off: on 20
+  /// random xtion scenes it did not help on balance, because an
+  /// undetected depth error field (1.9 mm at 1 m on one seed) tilts the
+  /// plane by 0.2 deg, more than the origin's own corners do
+  /// (benchmark/accuracy.md, "The origin's support plane in depth").
+  bool use_support_plane = false;
+  double support_plane_half_width_m = 0.5;
+  int support_plane_samples = 2500;
+  /// Depth bias left after the correction tilts the support plane in a way
+  /// no fit shows: its tilt is taken as known to no better than this over
+  /// the square root of the views (deg, 1 sigma).
+  double support_plane_min_sigma_deg = 0.02;
 
   /// Observations with a reprojection error above this many sigmas after the
   /// first joint adjustment are dropped before the second.
@@ -188,6 +204,15 @@ struct RoomMapBuildReport {
   /// frame's tilt (0: not used), and how far that turned the frame.
   int coplanar_markers = 0;
   double coplanar_turn_deg = 0;
+  /// The origin's support plane in depth (0 views: not used): views and
+  /// depth points fitted, its own tilt uncertainty (1 sigma) and its tilt
+  /// from the origin marker's as first adjusted.
+  int support_plane_views = 0;
+  int support_plane_points = 0;
+  double support_plane_tilt_sigma_deg = std::numeric_limits<double>::infinity();
+  double support_plane_offset_deg = 0;
+  /// How far the fused planes turned the room frame (deg; 0: not turned).
+  double room_frame_turn_deg = 0;
   /// 1-sigma position error (mm) the room frame's uncertainty gives at a point.
   double RoomFramePositionSigmaMm(const Eigen::Vector3d& point_in_room) const;
   /// Camera poses of the used frames (sequence index, room_from_camera).

@@ -10,6 +10,7 @@
 
 #include "geometry/umeyama.h"
 #include "planning/planning_test_util.h"
+#include "room_map/bundle_adjustment.h"
 #include "room_map/plan_stage.h"
 #include "room_map/room_map_builder.h"
 #include "sensor/case_folder.h"
@@ -190,6 +191,55 @@ TEST(RoomMapDepth, AScaleErrorOfTheDepthIsFoundFromTheMarkersAndRemoved) {
   std::printf("map scale against the truth %.5f, rmse %.2f mm over %zu markers\n", fit->scale,
               fit->rmse_m * 1000, est.size() / 4);
   EXPECT_NEAR(fit->scale, 1.0, 0.001);
+}
+
+// The origin's support plane: depth sampled on a grid around the marker in
+// its own plane lands on that plane, within the square asked for, and not
+// from behind the camera or outside the image.
+TEST(RoomMapOrigin, SupportDepthIsSampledOnTheMarkersPlaneAroundIt) {
+  CameraIntrinsics k;
+  k.width = 640;
+  k.height = 480;
+  k.fx = k.fy = 570;
+  k.cx = 319.5;
+  k.cy = 239.5;
+  k.depth_scale = 1000;
+  // A floor 1.5 m below the camera, seen 40 deg down; the marker 2 m ahead.
+  const Eigen::Vector3d normal = Eigen::AngleAxisd(-40 * M_PI / 180, Eigen::Vector3d::UnitX()) *
+                                 Eigen::Vector3d(0, -1, 0);
+  const Eigen::Vector3d centre(0.1, 0.4, 2.0);
+  const double d = normal.dot(centre);
+  cv::Mat depth(k.height, k.width, CV_16UC1);
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const Eigen::Vector3d ray((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1);
+      const double z = d / normal.dot(ray);
+      depth.at<uint16_t>(v, u) = z > 0 && z < 60 ? static_cast<uint16_t>(std::lround(z * 1000)) : 0;
+    }
+  }
+  // Marker axes in the plane.
+  const Eigen::Vector3d x_axis = Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d y_axis = normal.cross(x_axis).normalized();
+  const double side = 0.15;
+  std::array<Eigen::Vector2d, 4> corners;
+  const double h = side / 2;
+  const std::array<Eigen::Vector2d, 4> square = {{{-h, h}, {h, h}, {h, -h}, {-h, -h}}};
+  for (int c = 0; c < 4; ++c) corners[c] = k.Project(centre + square[c].x() * x_axis + square[c].y() * y_axis);
+  const double half_width = 0.4;
+  const std::vector<DepthSample> samples = SampleSupportDepth(depth, corners, k, side, half_width, 900);
+  ASSERT_GT(samples.size(), 400u);
+  EXPECT_LE(samples.size(), 900u);
+  double worst_off_plane = 0, worst_extent = 0;
+  for (const DepthSample& s : samples) {
+    const Eigen::Vector3d p = k.Unproject(s.pixel.x(), s.pixel.y(), s.depth_m);
+    worst_off_plane = std::max(worst_off_plane, std::abs(normal.dot(p) - d));
+    const Eigen::Vector3d q = p - centre;
+    worst_extent = std::max({worst_extent, std::abs(q.dot(x_axis)), std::abs(q.dot(y_axis))});
+  }
+  EXPECT_LT(worst_off_plane, 0.005);  // depth rounding and pixel rounding on a slanted plane
+  EXPECT_LT(worst_extent, half_width + 0.02);
+  EXPECT_GT(worst_extent, half_width - 0.05);
+  EXPECT_TRUE(SampleSupportDepth(cv::Mat(), corners, k, side, half_width, 900).empty());
 }
 
 }  // namespace

@@ -9,7 +9,11 @@
 // --store DB uses the newest room map in DB instead of building one.
 // Diagnostics by environment: NO_LOC=1 (map only), TRUTH_MARKERS=1 (localise
 // against the true marker poses), AXES=1 (camera error in camera axes),
-// NO_DEPTH_CHECK=1 (no depth check against the colour geometry),
+// NO_DEPTH_CHECK=1 (no depth check against the colour geometry), SUPPORT=1 (with
+// the origin's support plane in depth),
+// NO_COPLANAR=1 (without the coplanar markers),
+// SUPPORT_HW, SUPPORT_MIN_DEG, FIT_FRAME_ERRORS=1 (room frames' errors in the map's
+// best rigid fit to the truth: the cameras' own errors without the room frame's),
 // MIN_LM_OBS, MAX_LM, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
@@ -84,6 +88,10 @@ int main(int argc, char** argv) {
     if (corner_sigma > 0) build_options.marker_corner_sigma_px = corner_sigma;
     if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
     if (std::getenv("NO_DEPTH_CHECK")) build_options.estimate_depth_correction = false;
+    if (std::getenv("SUPPORT")) build_options.use_support_plane = true;
+    if (std::getenv("NO_COPLANAR")) build_options.use_coplanar_markers = false;
+    if (const char* v = std::getenv("SUPPORT_HW")) build_options.support_plane_half_width_m = std::atof(v);
+    if (const char* v = std::getenv("SUPPORT_MIN_DEG")) build_options.support_plane_min_sigma_deg = std::atof(v);
     if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
     if (const char* v = std::getenv("LOC_LM")) build_options.max_localization_landmarks = std::atoi(v);
     RoomMapBuildResult build;
@@ -119,6 +127,7 @@ int main(int argc, char** argv) {
     }
     std::cout << StringPrintf("markers mapped: %zu of %zu; corner error mean %.3f mm, max %.3f mm\n",
                               build.map.markers.size(), truth.room_markers.size(), n ? sum / n : 0.0, worst);
+    Rigid3d truth_from_map;  // the best rigid fit of the map's corners to the truth
     {
       // Internal consistency: the map's corners after the best rigid fit to the truth.
       std::vector<Eigen::Vector3d> est, tru;
@@ -135,6 +144,10 @@ int main(int argc, char** argv) {
       if (sim3) std::cout << StringPrintf("similarity fit: scale %.5f, rmse %.3f mm\n", sim3->scale, sim3->rmse_m * 1000);
       const auto fit = EstimateRigidTransform(est, tru);
       if (fit) {
+        truth_from_map = fit->target_from_source;
+        const Eigen::Vector3d couch = build_options.couch_point_in_room;
+        std::cout << StringPrintf("room frame error at the couch point (map's best fit to the truth): %.3f mm\n",
+                                  (truth_from_map * couch - couch).norm() * 1000);
         double s2 = 0, mx = 0;
         for (size_t i = 0; i < est.size(); ++i) {
           const double e = (fit->target_from_source * est[i] - tru[i]).norm() * 1000;
@@ -152,6 +165,22 @@ int main(int argc, char** argv) {
       const TrajectoryEvaluation e = EvaluateTrajectory(*room.CameraGroundTruth(), est);
       std::cout << StringPrintf("room frames (bundle adjusted): MTE %.3f mm, MRE %.4f deg, max %.3f mm, lost %.1f %%\n",
                                 e.translation_mm.mean, e.rotation_deg.mean, e.translation_mm.max, e.lost_percent);
+      if (std::getenv("FIT_FRAME_ERRORS")) {
+        // The frames in the map's best fit to the truth: camera errors without
+        // the room frame's; rotation error as a vector in the room frame (deg).
+        const auto truth_poses = *room.CameraGroundTruth();
+        for (const StampedPose& p : est) {
+          for (const StampedPose& t : truth_poses) {
+            if (std::abs(t.timestamp_s - p.timestamp_s) > 1e-4) continue;
+            const Rigid3d fitted = truth_from_map * p.room_from_x;
+            const Eigen::AngleAxisd aa(fitted.rotation * t.room_from_x.rotation.inverse());
+            const Eigen::Vector3d r = aa.axis() * aa.angle() * 180 / M_PI;
+            std::cout << StringPrintf("  room frame at %.3f s in the fitted map: %.2f mm, rotation [%.3f %.3f %.3f] deg\n",
+                                      p.timestamp_s, (fitted.translation - t.room_from_x.translation).norm() * 1000,
+                                      r.x(), r.y(), r.z());
+          }
+        }
+      }
       if (std::getenv("FRAME_ERRORS")) {
         for (const FrameError& f : e.frames) {
           std::cout << StringPrintf("  room frame at %.3f s: %.2f mm %.3f deg\n", f.timestamp_s, f.error.translation_mm, f.error.rotation_deg);
