@@ -93,9 +93,10 @@ struct BodyTrackerOptions {
   /// Starting from a hint (no sticker read, no recent pose), the surface
   /// fit leaves the pose free to slide along the body by a few mm, beyond
   /// the refinement's reach on 10-15 px stickers: the stickers are then
-  /// refined at the fitted pose shifted across the view by every offset of
-  /// a grid of this step (mm) and half-width (steps), and the shift that
-  /// refines the most (at least 2) is kept. 0 steps: off.
+  /// refined at the fitted pose shifted across the view by the offsets of
+  /// a grid of this step (mm) and half-width (steps), ring by ring from the
+  /// centre; after the first ring where a shift refines at least 2, the
+  /// shift that refines the most is kept. 0 steps: off.
   double hint_search_step_mm = 2.0;
   int hint_search_steps = 3;
 

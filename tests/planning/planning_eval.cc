@@ -14,7 +14,7 @@
 // NO_COPLANAR=1 (without the coplanar markers),
 // SUPPORT_HW, SUPPORT_MIN_DEG, FIT_FRAME_ERRORS=1 (room frames' errors in the map's
 // best rigid fit to the truth: the cameras' own errors without the room frame's),
-// MIN_LM_OBS, MAX_LM, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides).
+// MIN_LM_OBS, MAX_LM, LM_VOXEL, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
 // camera error does to the patient's position).
@@ -93,6 +93,7 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("SUPPORT_HW")) build_options.support_plane_half_width_m = std::atof(v);
     if (const char* v = std::getenv("SUPPORT_MIN_DEG")) build_options.support_plane_min_sigma_deg = std::atof(v);
     if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
+    if (const char* v = std::getenv("LM_VOXEL")) build_options.landmark_voxel_m = std::atof(v);
     if (const char* v = std::getenv("LOC_LM")) build_options.max_localization_landmarks = std::atoi(v);
     RoomMapBuildResult build;
     if (!store.empty()) {
@@ -124,6 +125,20 @@ int main(int argc, char** argv) {
         std::cout << StringPrintf("  %3d   %6.3f / %6.3f           %6.3f           %d\n", m.id, e_sum / 4, e_max,
                                   centre, m.num_observations);
       }
+    }
+    {
+      // What the patient feels: markers within 1.5 m of the couch point, in the map's own room frame.
+      double near_sum = 0;
+      int near_n = 0;
+      for (const auto& m : build.map.markers) {
+        for (const auto& t : truth.room_markers) {
+          if (t.id != m.id || (t.parent_from_marker.translation - build_options.couch_point_in_room).norm() > 1.5) continue;
+          for (int c = 0; c < 4; ++c) near_sum += (m.corners_in_room[c] - t.corners_m[c]).norm() * 1000;
+          near_n += 4;
+        }
+      }
+      std::cout << StringPrintf("markers within 1.5 m of the couch point: %d, corner error mean %.3f mm\n", near_n / 4,
+                                near_n ? near_sum / near_n : 0.0);
     }
     std::cout << StringPrintf("markers mapped: %zu of %zu; corner error mean %.3f mm, max %.3f mm\n",
                               build.map.markers.size(), truth.room_markers.size(), n ? sum / n : 0.0, worst);
