@@ -216,6 +216,38 @@ SupportPlaneFit FitSupportPlane(const std::vector<SupportView>& views, double ha
   return fit;
 }
 
+// Of a marker's two IPPE solutions (camera_from_marker), the one whose plane
+// the depth around the marker (the floor or wall it lies on) agrees with:
+// Cauchy-weighted depth residuals over the sensor's noise; nullopt unless
+// one explains the depth clearly better (cost ratio >= 2) and at least 50
+// samples lie on its plane. One small, oblique view cannot tell its two
+// solutions apart by reprojection, and the few depth pixels inside a 20 px
+// marker cannot either; the plane around it can.
+std::optional<int> SolutionBySupportDepth(const MarkerPose& pose, const std::vector<DepthSample>& samples,
+                                          const CameraIntrinsics& K, const BaOptions& ba_options) {
+  if (pose.num_solutions != 2 || samples.size() < 50) return std::nullopt;
+  std::array<double, 2> cost{0, 0};
+  std::array<int, 2> on_plane{0, 0};
+  for (int k = 0; k < 2; ++k) {
+    const Rigid3d& m = pose.solutions[k].camera_from_marker;
+    const Eigen::Vector3d n = m.rotation * Eigen::Vector3d::UnitZ();
+    const double d = n.dot(m.translation);
+    for (const DepthSample& sample : samples) {
+      const Eigen::Vector3d ray((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy, 1);
+      const double denom = n.dot(ray);
+      if (std::abs(denom) < 1e-6) continue;
+      const double z = d / denom;
+      const double sigma = ba_options.DepthSigmaM(sample.depth_m);
+      const double r = z > 0 ? (sample.depth_m - z) / sigma : 1e3;
+      cost[k] += std::log1p(r * r / 9);
+      on_plane[k] += std::abs(r) < 3;
+    }
+  }
+  const int better = cost[0] <= cost[1] ? 0 : 1;
+  if (on_plane[better] < 50 || !(cost[1 - better] >= 2 * cost[better])) return std::nullopt;
+  return better;
+}
+
 // The candidates the thinning left out, triangulated against the adjusted
 // cameras (held fixed) and appended to the map for localisation only: each
 // point starts from its best-depth observation, Gauss-Newton on reprojection
@@ -536,7 +568,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
             f.poses.push_back(pose);
             f.depth_samples.push_back(std::move(samples));
             f.support_samples.emplace_back();
-            if (obs.id == origin_id && options.use_support_plane) {
+            if (obs.id == origin_id) {
               f.support_samples.back() =
                   SampleSupportDepth(frame.depth, obs.corners_px, K, marker_size,
                                      options.support_plane_half_width_m, options.support_plane_samples);
@@ -920,6 +952,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         for (int k = 0; k < pose.num_solutions; ++k) solutions.push_back(pose.solutions[k].camera_from_marker);
       } else if (pose.status == MarkerPoseStatus::kOk) {
         solutions.push_back(pose.camera_from_marker);
+      } else if (const std::optional<int> k =
+                     SolutionBySupportDepth(pose, frames[s].support_samples[m], K, options.bundle_adjustment)) {
+        // The origin's single view, settled by the plane around it.
+        solutions.push_back(pose.solutions[*k].camera_from_marker);
+        ARPOS_DEBUG("room marker " << id << ": its single view settled by the depth around it (solution "
+                                   << *k << ")");
       }
       for (const Rigid3d& camera_from_marker : solutions) {
         const Rigid3d candidate = frames[s].camera_from_room.Inverse() * camera_from_marker;

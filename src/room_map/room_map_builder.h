@@ -140,6 +140,8 @@ struct RoomMapBuildOptions {
   /// undetected depth error field (1.9 mm at 1 m on one seed) tilts the
   /// plane by 0.2 deg, more than the origin's own corners do
   /// (benchmark/accuracy.md, "The origin's support plane in depth").
+  /// (The samples are taken whatever this says: they also settle which of
+  /// its two single-view poses a lone, ambiguous view of the origin has.)
   bool use_support_plane = false;
   double support_plane_half_width_m = 0.5;
   int support_plane_samples = 2500;
