@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include <Eigen/Eigenvalues>
+
 #include "features/response_from_recording.h"
 #include "geometry/mesh_io.h"
 #include "geometry/so3.h"
@@ -104,10 +106,46 @@ std::optional<Rigid3d> RobustMeanOffset(const std::vector<Offset>& offsets, cons
   return Rigid3d(turn.rotation, centre + mean.tail<3>() - turn * centre);
 }
 
+// How well the mean of `offsets` places `centre` (mm, 1 sigma, largest
+// axis): the spread of the shifts the mean kept (the same outlier rule as
+// RobustMeanOffset) over the square root of their number; infinity with
+// fewer than 3 kept (two frames cannot show their spread).
+double MeanOffsetSigmaMm(const std::vector<Offset>& offsets, double margin_m, int* used_out) {
+  *used_out = 0;
+  if (offsets.empty()) return std::numeric_limits<double>::infinity();
+  std::vector<double> sizes;
+  for (const auto& v : offsets) sizes.push_back(v.tail<3>().norm());
+  std::vector<double> sorted = sizes;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double limit = 3 * sorted[sorted.size() / 2] + margin_m;
+  std::vector<Eigen::Vector3d> kept;
+  for (size_t k = 0; k < offsets.size(); ++k) {
+    if (sizes[k] <= limit) kept.push_back(offsets[k].tail<3>());
+  }
+  *used_out = static_cast<int>(kept.size());
+  if (kept.size() < 3) return std::numeric_limits<double>::infinity();
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& v : kept) mean += v;
+  mean /= static_cast<double>(kept.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& v : kept) cov += (v - mean) * (v - mean).transpose();
+  cov /= static_cast<double>((kept.size() - 1) * kept.size());
+  return 1000 * std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues().maxCoeff()));
+}
+
 }  // namespace
+
+std::string SessionStageResult::RoomPlacementText() const {
+  return std::isfinite(room_placement_sigma_mm)
+             ? StringPrintf("the scan placed in the room from %d frames, %.2f mm at the stickers (1 sigma)",
+                            room_placement_frames, room_placement_sigma_mm)
+             : StringPrintf("the scan placed in the room from %d frame(s), uncertainty unknown",
+                            room_placement_frames);
+}
 
 std::string SessionStageOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
+  if (!(max_room_placement_sigma_mm > 0)) return "max_room_placement_sigma_mm must be positive";
   if (marker_frame_step < 1) return "marker_frame_step must be at least 1";
   if (reconstruction_frame_step < 1) return "reconstruction_frame_step must be at least 1";
   if (poisson_depth < 4 || poisson_depth > 11) return "poisson_depth must be in 4..11";
@@ -153,6 +191,8 @@ std::string SessionStageResult::Summary() const {
                         "the stickers\n",
                         surface_offset_frames, 1000 * surface_offset_shift_m.norm());
   }
+  out << RoomPlacementText() << "\n";
+  for (const std::string& w : warnings) out << "warning: " << w << "\n";
   return out.str();
 }
 
@@ -454,6 +494,7 @@ void SessionController::Run() {
     // and sticker-posed.
     const Rigid3d room_from_sticker_frame =
         RobustMeanOffset(offsets, centre, 0.002, 1).value_or(Rigid3d::Identity());
+    result_.room_placement_sigma_mm = MeanOffsetSigmaMm(offsets, 0.002, &result_.room_placement_frames);
     for (ScanFrame& f : frames) {
       if (f.posed) {
         f.view.room_from_camera = room_from_sticker_frame * f.view.room_from_camera;
@@ -556,6 +597,7 @@ void SessionController::Run() {
     }
     result_.surface_offset_frames = static_cast<int>(offsets.size());
     if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3)) {
+      result_.room_placement_sigma_mm = MeanOffsetSigmaMm(offsets, 0.002, &result_.room_placement_frames);
       const Rigid3d& C = *delta;
       result_.surface_offset_shift_m = C * centre - centre;
       fused.Transform(C);
@@ -566,6 +608,21 @@ void SessionController::Run() {
       for (auto& m : result_.marker_map.markers) m.room_from_marker = C * m.room_from_marker;
       for (auto& p : camera_poses) p.room_from_x = C * p.room_from_x;
     }
+  }
+  // How well the scan is placed in the room: the patient's position at scan
+  // time (and the stickers tracking starts from) inherits this error.
+  if (!(result_.room_placement_sigma_mm <= options_.max_room_placement_sigma_mm)) {
+    result_.warnings.push_back(
+        result_.room_placement_frames < 3
+            ? StringPrintf("the body scan is placed in the room by %d frame(s) that see the room map, too few "
+                           "to tell how well; record the scan again with the room markers beside the couch "
+                           "in view for a few seconds",
+                           result_.room_placement_frames)
+            : StringPrintf("the body scan is placed in the room by %d frames that see the room map, known to "
+                           "%.2f mm at the stickers (1 sigma; tolerance %.2f mm); record the scan again with "
+                           "the room markers beside the couch in view for longer",
+                           result_.room_placement_frames, result_.room_placement_sigma_mm,
+                           options_.max_room_placement_sigma_mm));
   }
   t0 = Clock::now();
   for (const ScanFrame& f : frames) {
@@ -702,7 +759,8 @@ void SessionController::Run() {
     session.plan_id = plan_id;
     session.fraction = static_cast<int>(database_->ListSessions(plan_id).size()) + 1;
     session.operator_name = options_.op.Actor();
-    session.notes = "session stage on " + folder.root.string();
+    session.notes = "session stage on " + folder.root.string() + "; " + result_.RoomPlacementText();
+    for (const std::string& w : result_.warnings) session.notes += "; warning: " + w;
     session.on_unapproved_plan = result_.on_unapproved_plan;
     // The plan's approval as it is when the session opens (inside the
     // transaction: a plan approved meanwhile is seen).

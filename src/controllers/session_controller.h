@@ -30,6 +30,7 @@
 /// Every artefact is stored (one transaction at the end) with audit entries.
 
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -85,6 +86,9 @@ struct SessionStageOptions {
   /// Fewer mapped body stickers than this: the stage stops with an error
   /// (tracking follows the patient by them; one or two give a weak pose).
   int min_stickers = 3;
+  /// The scan's placement in the room weaker than this (1 sigma at the
+  /// stickers, mm) is reported as a warning with what to record.
+  double max_room_placement_sigma_mm = 1.0;
   int poisson_depth = 8;
   int threads = 2;
 
@@ -138,6 +142,15 @@ struct SessionStageResult {
   /// than 3: none applied) and the shift it gave the stickers' centre (m).
   int surface_offset_frames = 0;
   Eigen::Vector3d surface_offset_shift_m = Eigen::Vector3d::Zero();
+  /// How well the scan is placed in the room: the frames the room map
+  /// localised whose offsets gave the placement, and its 1-sigma error at
+  /// the stickers (mm; the spread of those offsets over the square root of
+  /// their number; infinity below 3 frames).
+  int room_placement_frames = 0;
+  double room_placement_sigma_mm = std::numeric_limits<double>::infinity();
+  /// What the user should know (a weakly placed scan), with what to record.
+  std::vector<std::string> warnings;
+  std::string RoomPlacementText() const;
   int reconstruction_points = 0;
   /// Frames offered to the reconstruction and those fused (a frame whose
   /// GICP correction is refused is left out).

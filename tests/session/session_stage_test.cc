@@ -2,6 +2,8 @@
 // sample session (small: 24 room, 8 body-scan frames).
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -209,6 +211,22 @@ TEST(SessionStage, RoomOffsetFromFramesRegisteredToTheSurface) {
   const PoseError e = ModelPoseErrorAtScanTime(case_dir, dir.path() / "out");
   EXPECT_LT(e.translation_mm, 3.0);
   EXPECT_LT(e.rotation_deg, 0.2);
+  // How well the scan is placed in the room is said, stored with the
+  // session, and honest (the error within 3 sigma and 1 mm for the rest).
+  const size_t at = r.session_summary.find("the scan placed in the room from ");
+  ASSERT_NE(at, std::string::npos) << r.session_summary;
+  int frames = 0;
+  double sigma_mm = 0;
+  ASSERT_EQ(std::sscanf(r.session_summary.c_str() + at, "the scan placed in the room from %d frames, %lf mm", &frames,
+                        &sigma_mm),
+            2)
+      << r.session_summary;
+  EXPECT_GE(frames, 3);
+  EXPECT_GT(sigma_mm, 0.0);
+  EXPECT_LT(e.translation_mm, 3 * sigma_mm + 1.0);
+  const auto session = db->GetSession(r.session_id);
+  ASSERT_TRUE(session.has_value());
+  EXPECT_NE(session->notes.find("the scan placed in the room from"), std::string::npos) << session->notes;
 }
 
 // A body scan with no patient on the couch (the room recording put in its
