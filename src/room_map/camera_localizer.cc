@@ -251,19 +251,13 @@ struct CameraLocalizer::Impl {
       if (u < border || v < border || u >= K.width - border || v >= K.height - border) continue;
       const std::uint8_t* d = map.landmark_descriptors.ptr<std::uint8_t>(l);
       const double max_dz = std::max(0.05, 5 * DepthSigma(p.z()));
-      int best = -1, d1 = 257, d2 = 257;
+      NearestTwo nearest;
       grid.ForEachInRadius(u, v, radius_px, [&](int i) {
         const float z = keypoints.depth_m[i];
         if (z > 0 && std::abs(z - p.z()) > max_dz) return;
-        const int dist = HammingDistance32(d, keypoints.descriptors.ptr<std::uint8_t>(i));
-        if (dist < d1) {
-          d2 = d1;
-          d1 = dist;
-          best = i;
-        } else if (dist < d2) {
-          d2 = dist;
-        }
+        nearest.Offer(i, HammingDistance32(d, keypoints.descriptors.ptr<std::uint8_t>(i)));
       });
+      const int best = nearest.best, d1 = nearest.d1, d2 = nearest.d2;
       if (best < 0 || d1 > options.max_hamming) continue;
       if (d2 <= 256 && d1 > options.match_ratio * d2) continue;
       if (d1 < match_distance[best]) {
@@ -291,20 +285,16 @@ struct CameraLocalizer::Impl {
         [&](const cv::Range& range) {
           for (int i = range.start; i < range.end; ++i) {
             const std::uint8_t* d = keypoints.descriptors.ptr<std::uint8_t>(i);
-            int best = -1, d1 = 257, d2 = 257;
+            NearestTwo nearest;
             for (int l = 0; l < n_landmarks; ++l) {
-              const int dist = HammingDistance32(d, map.landmark_descriptors.ptr<std::uint8_t>(l));
-              if (dist < d1) {
-                d2 = d1;
-                d1 = dist;
-                best = l;
-              } else if (dist < d2) {
-                d2 = dist;
-              }
+              nearest.Offer(l, HammingDistance32(d, map.landmark_descriptors.ptr<std::uint8_t>(l)));
             }
-            if (best < 0 || d1 > options.relocalisation_max_hamming || d1 > options.relocalisation_ratio * d2) continue;
-            match_of_keypoint[i] = best;
-            match_distance[i] = d1;
+            if (nearest.best < 0 || nearest.d1 > options.relocalisation_max_hamming ||
+                nearest.d1 > options.relocalisation_ratio * nearest.d2) {
+              continue;
+            }
+            match_of_keypoint[i] = nearest.best;
+            match_distance[i] = nearest.d1;
           }
         },
         2);

@@ -95,6 +95,24 @@ class KeypointExtractor {
   std::vector<cv::Point2f> points_;
 };
 
+/// The nearest and second-nearest of descriptors offered one by one (for the
+/// ratio test): `best` is the index offered with the smallest distance `d1`,
+/// `d2` the next smallest distance; 257 (beyond any 256-bit distance) until
+/// offered.
+struct NearestTwo {
+  int best = -1;
+  int d1 = 257, d2 = 257;
+  void Offer(int index, int distance) {
+    if (distance < d1) {
+      d2 = d1;
+      d1 = distance;
+      best = index;
+    } else if (distance < d2) {
+      d2 = distance;
+    }
+  }
+};
+
 /// Hamming distance of two 32-byte descriptors. On x86-64 with SSE2 only
 /// (Debian's baseline has no POPCNT instruction, so __builtin_popcountll
 /// becomes a bit-twiddling call per word): a byte-wise bit count in two

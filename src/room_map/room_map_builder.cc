@@ -880,20 +880,13 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     std::vector<cv::Point2d> image;
     for (size_t i = 0; i < f.keypoints.size(); ++i) {
       const std::uint8_t* d = f.keypoints.descriptors.ptr<std::uint8_t>(static_cast<int>(i));
-      int best = -1, d1 = 257, d2 = 257;
+      NearestTwo nearest;
       for (int c : pool) {
-        const int dist =
-            HammingDistance32(d, Descriptor(frames, candidates[c].descriptor_frame, candidates[c].descriptor_index));
-        if (dist < d1) {
-          d2 = d1;
-          d1 = dist;
-          best = c;
-        } else if (dist < d2) {
-          d2 = dist;
-        }
+        nearest.Offer(c, HammingDistance32(d, Descriptor(frames, candidates[c].descriptor_frame,
+                                                         candidates[c].descriptor_index)));
       }
-      if (best < 0 || d1 > options.max_hamming || d1 > 0.8 * d2) continue;
-      const Eigen::Vector3d X = candidates[best].Position();
+      if (nearest.best < 0 || nearest.d1 > options.max_hamming || nearest.d1 > 0.8 * nearest.d2) continue;
+      const Eigen::Vector3d X = candidates[nearest.best].Position();
       object.emplace_back(X.x(), X.y(), X.z());
       image.emplace_back(f.keypoint_px[i].x(), f.keypoint_px[i].y());
     }

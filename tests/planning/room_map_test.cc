@@ -48,6 +48,29 @@ TEST(Keypoints, HammingDistanceCountsEveryDifferingBit) {
   }
 }
 
+TEST(Keypoints, NearestTwoKeepsTheSmallestTwoDistancesWhateverTheOrder) {
+  NearestTwo none;
+  EXPECT_EQ(none.best, -1);
+  EXPECT_EQ(none.d1, 257);
+  EXPECT_EQ(none.d2, 257);
+  const std::vector<int> distances = {40, 12, 90, 12, 30, 7};
+  NearestTwo n;
+  for (size_t i = 0; i < distances.size(); ++i) n.Offer(static_cast<int>(i), distances[i]);
+  EXPECT_EQ(n.best, 5);
+  EXPECT_EQ(n.d1, 7);
+  EXPECT_EQ(n.d2, 12);
+  // A tie for the best: the first offered stays best, the tie is second.
+  NearestTwo tie;
+  tie.Offer(3, 20);
+  tie.Offer(4, 20);
+  EXPECT_EQ(tie.best, 3);
+  EXPECT_EQ(tie.d2, 20);
+  NearestTwo one;
+  one.Offer(9, 100);
+  EXPECT_EQ(one.best, 9);
+  EXPECT_EQ(one.d2, 257);  // no second: the ratio test cannot reject
+}
+
 TEST(RoomMap, MarkerCornersAreNearTheTruth) {
   const auto& c = GetSmallCase();
   const RoomMapBuildResult& built = GetSmallCaseMap();
