@@ -121,12 +121,28 @@ struct KeypointDepthCost {
   double z, inv_sigma;
 };
 
+// Depth readings at image pixels as samples at their ideal (undistorted)
+// pixels, at most `max_samples`.
+std::vector<DepthSample> IdealDepthSamples(std::vector<cv::Point2d> px, const std::vector<float>& z,
+                                           const CameraIntrinsics& k, int max_samples) {
+  if (k.HasDistortion() && !px.empty()) {
+    std::vector<cv::Point2d> ideal;
+    cv::undistortPoints(px, ideal, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
+    px = ideal;
+  }
+  std::vector<DepthSample> samples;
+  samples.reserve(std::min<size_t>(px.size(), static_cast<size_t>(std::max(0, max_samples))));
+  for (size_t i = 0; i < px.size() && static_cast<int>(samples.size()) < max_samples; ++i) {
+    samples.push_back({Eigen::Vector2f(static_cast<float>(px[i].x), static_cast<float>(px[i].y)), z[i]});
+  }
+  return samples;
+}
+
 }  // namespace
 
 std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth, const std::array<Eigen::Vector2d, 4>& corners_image_px,
                                            const CameraIntrinsics& k, int max_samples) {
-  std::vector<DepthSample> samples;
-  if (depth.empty() || max_samples <= 0) return samples;
+  if (depth.empty() || max_samples <= 0) return {};
   ARPOS_CHECK(depth.type() == CV_16UC1, "depth must be CV_16UC1");
   const std::vector<cv::Point2f> square = {{-0.5f, 0.5f}, {0.5f, 0.5f}, {0.5f, -0.5f}, {-0.5f, -0.5f}};
   std::vector<cv::Point2f> quad;
@@ -147,22 +163,13 @@ std::vector<DepthSample> SampleMarkerDepth(const cv::Mat& depth, const std::arra
       z.push_back(static_cast<float>(d / k.depth_scale));
     }
   }
-  if (k.HasDistortion() && !px.empty()) {
-    std::vector<cv::Point2d> ideal;
-    cv::undistortPoints(px, ideal, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
-    px = ideal;
-  }
-  for (size_t i = 0; i < px.size() && static_cast<int>(samples.size()) < max_samples; ++i) {
-    samples.push_back({Eigen::Vector2f(static_cast<float>(px[i].x), static_cast<float>(px[i].y)), z[i]});
-  }
-  return samples;
+  return IdealDepthSamples(std::move(px), z, k, max_samples);
 }
 
 std::vector<DepthSample> SampleSupportDepth(const cv::Mat& depth, const std::array<Eigen::Vector2d, 4>& corners_image_px,
                                             const CameraIntrinsics& k, double marker_side_m, double half_width_m,
                                             int max_samples) {
-  std::vector<DepthSample> samples;
-  if (depth.empty() || max_samples <= 0 || !(marker_side_m > 0) || !(half_width_m > 0)) return samples;
+  if (depth.empty() || max_samples <= 0 || !(marker_side_m > 0) || !(half_width_m > 0)) return {};
   ARPOS_CHECK(depth.type() == CV_16UC1, "depth must be CV_16UC1");
   const float h = static_cast<float>(marker_side_m / 2);
   const std::vector<cv::Point2f> square = {{-h, h}, {h, h}, {h, -h}, {-h, -h}};
@@ -188,16 +195,7 @@ std::vector<DepthSample> SampleSupportDepth(const cv::Mat& depth, const std::arr
       z.push_back(static_cast<float>(d / k.depth_scale));
     }
   }
-  if (k.HasDistortion() && !px.empty()) {
-    std::vector<cv::Point2d> ideal;
-    cv::undistortPoints(px, ideal, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
-    px = ideal;
-  }
-  samples.reserve(px.size());
-  for (size_t i = 0; i < px.size(); ++i) {
-    samples.push_back({Eigen::Vector2f(static_cast<float>(px[i].x), static_cast<float>(px[i].y)), z[i]});
-  }
-  return samples;
+  return IdealDepthSamples(std::move(px), z, k, max_samples);
 }
 
 BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
