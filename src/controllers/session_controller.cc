@@ -507,11 +507,13 @@ void SessionController::Run() {
     for (const ScanFrame& f : frames) result_.frames_posed_by_stickers += (f.posed && !f.localized) ? 1 : 0;
     result_.marker_map = BuildBodyMarkerMap(views_of(false), camera, map_options);
   } else {
-    // No frame has two mapped stickers: the room poses as they are.
+    // No frame has two mapped stickers: the room poses as they are (each
+    // frame placed on its own; how well together is not known).
     for (ScanFrame& f : frames) {
       f.posed = f.localized;
       if (f.localized) f.view.room_from_camera = f.room_from_camera;
     }
+    result_.room_placement_frames = result_.frames_localized;
     result_.marker_map = BuildBodyMarkerMap(views_of(false), camera, map_options);
   }
   t_markers += SecondsSince(t0);
@@ -610,7 +612,8 @@ void SessionController::Run() {
     }
   }
   // How well the scan is placed in the room: the patient's position at scan
-  // time (and the stickers tracking starts from) inherits this error.
+  // time inherits this error (tracking does not: it keeps the stickers
+  // relative to the model and places the camera in the room every frame).
   if (!(result_.room_placement_sigma_mm <= options_.max_room_placement_sigma_mm)) {
     result_.warnings.push_back(
         result_.room_placement_frames < 3
