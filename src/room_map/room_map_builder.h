@@ -139,7 +139,7 @@ struct RoomMapBuildOptions {
   /// random xtion scenes it did not help on balance, because an
   /// undetected depth error field (1.9 mm at 1 m on one seed) tilts the
   /// plane by 0.2 deg, more than the origin's own corners do
-  /// (benchmark/accuracy.md, "The origin's support plane in depth").
+  /// (benchmark/accuracy.md, "What limits a far origin, and what was tried").
   /// (The samples are taken whatever this says: they also settle which of
   /// its two single-view poses a lone, ambiguous view of the origin has.)
   bool use_support_plane = false;
