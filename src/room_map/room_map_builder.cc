@@ -1416,7 +1416,6 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
           report.room_frame_tilt_sigma_deg = std::sqrt(std::max(0.0, tilt.eigenvalues().maxCoeff())) * 180 / M_PI;
           report.room_frame_couch_sigma_mm = report.RoomFramePositionSigmaMm(options.couch_point_in_room);
           report.room_frame_turn_deg = omega.norm() * 180 / M_PI;
-          if (report.coplanar_markers > 0) report.coplanar_turn_deg = report.room_frame_turn_deg;
         }
       }
     }

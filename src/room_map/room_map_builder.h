@@ -203,9 +203,8 @@ struct RoomMapBuildReport {
   Eigen::Matrix<double, 6, 6> room_frame_covariance =
       Eigen::Matrix<double, 6, 6>::Constant(std::numeric_limits<double>::infinity());
   /// Markers coplanar with the origin whose plane was fused into the room
-  /// frame's tilt (0: not used), and how far that turned the frame.
+  /// frame's tilt (0: not used).
   int coplanar_markers = 0;
-  double coplanar_turn_deg = 0;
   /// The origin's support plane in depth (0 views: not used): views and
   /// depth points fitted, its own tilt uncertainty (1 sigma) and its tilt
   /// from the origin marker's as first adjusted.
