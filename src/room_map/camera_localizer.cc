@@ -515,6 +515,15 @@ void CameraLocalizer::Reset() {
   impl_->last_keypoints_used = 0;
 }
 
+void CameraLocalizer::SuggestPose(double t, const Rigid3d& room_from_camera) {
+  Impl& m = *impl_;
+  if (m.frames_lost == 0 || (m.have_last && !(t > m.last_t)) || m.frames_lost > options_.recent_pose_max_frames) return;
+  m.last_camera_from_room = room_from_camera.Inverse();
+  m.last_t = t;
+  m.have_last = true;
+  m.have_prev = m.have_cov = false;
+}
+
 LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame) { return Run(frame, nullptr); }
 
 LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame,

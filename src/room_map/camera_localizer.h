@@ -230,6 +230,12 @@ class CameraLocalizer {
 
   /// Forgets the motion model: the next frame is relocalised.
   void Reset();
+  /// After a frame this localiser lost: where the camera was at `t` (s) by
+  /// other means (e.g. the patient seen in the frame and its predicted room
+  /// pose). The next frames search from there instead of from the last pose
+  /// this localiser found; nothing else changes (still lost, no velocity, no
+  /// covariance). Ignored after a localised frame or for an older `t`.
+  void SuggestPose(double t, const Rigid3d& room_from_camera);
 
   const RoomMap& map() const { return map_; }
   const CameraLocalizerOptions& options() const { return options_; }

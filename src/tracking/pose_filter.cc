@@ -30,6 +30,30 @@ void PoseFilter::Predict(Axis* a, double dt, double q) const {
   a->pvv = a->pvv + q2 * dt * dt;
 }
 
+std::optional<FilteredPose> PoseFilter::Predict(double t) const {
+  const double dt = t - t_;
+  if (!started_ || !(dt > 0) || dt > options_.max_gap_s) return std::nullopt;
+  FilteredPose out;
+  double max_p = 0, max_r = 0;
+  Eigen::Vector3d position, rv;
+  for (int k = 0; k < 3; ++k) {
+    Axis p = pos_[k], r = rot_[k];
+    Predict(&p, dt, options_.acceleration_m_s2);
+    Predict(&r, dt, options_.angular_acceleration_rad_s2);
+    position[k] = p.x;
+    rv[k] = r.x;
+    max_p = std::max(max_p, p.pxx);
+    max_r = std::max(max_r, r.pxx);
+  }
+  const double angle = rv.norm();
+  const Eigen::Quaterniond delta =
+      angle > 0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, rv / angle)) : Eigen::Quaterniond::Identity();
+  out.room_from_model = Rigid3d((delta * rotation_).normalized(), position);
+  out.position_sigma_m = std::sqrt(max_p);
+  out.rotation_sigma_rad = std::sqrt(max_r);
+  return out;
+}
+
 FilteredPose PoseFilter::Update(double t, const Rigid3d& measured, double position_sigma_m,
                                 double rotation_sigma_rad) {
   const double rp = std::max(1e-6, position_sigma_m), rr = std::max(1e-7, rotation_sigma_rad);

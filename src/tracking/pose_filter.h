@@ -50,6 +50,11 @@ class PoseFilter {
   /// Adds a measured pose at time `t` (s, increasing) with its 1-sigma
   /// position (m, at the model origin) and rotation (rad) uncertainty.
   FilteredPose Update(double t, const Rigid3d& measured, double position_sigma_m, double rotation_sigma_rad);
+  /// Where the motion model puts the pose at time `t` (s), without a
+  /// measurement and without changing the filter; sigmas grow with the time
+  /// since the last update. nullopt when the filter has not started, `t` is
+  /// not after the last update, or further from it than `max_gap_s`.
+  std::optional<FilteredPose> Predict(double t) const;
   /// Forgets everything (the next Update starts afresh).
   void Reset() { started_ = false; }
 

@@ -27,6 +27,7 @@ std::string TrackerOptions::Validate() const {
   if (!(uncertainty_sigmas >= 0)) return "uncertainty_sigmas must not be negative";
   if (!(uncertainty_floor_mm >= 0) || !(uncertainty_floor_deg >= 0)) return "uncertainty floors must not be negative";
   if (!(max_position_sigma_mm > 0)) return "max_position_sigma_mm must be positive";
+  if (!(max_camera_carry_s >= 0)) return "max_camera_carry_s must not be negative";
   problem = filter.Validate();
   if (!problem.empty()) return "filter: " + problem;
   return "";
@@ -55,6 +56,31 @@ Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> 
 }
 
 Tracker::~Tracker() = default;
+
+bool Tracker::CarryByMotion(double t, TrackedFrame* out) {
+  if (!options_.temporal_filter || !(options_.max_camera_carry_s > 0) || last_model_t_ < 0 ||
+      !(t - last_model_t_ <= options_.max_camera_carry_s)) {
+    return false;
+  }
+  const std::optional<FilteredPose> predicted = filter_.Predict(t);
+  if (!predicted || !(1000 * predicted->position_sigma_m <= options_.max_position_sigma_mm)) return false;
+  out->state = TrackingState::kCarried;
+  out->room_from_model = predicted->room_from_model;
+  out->position_sigma_mm = 1000 * predicted->position_sigma_m;
+  out->rotation_sigma_deg = kDegPerRad * predicted->rotation_sigma_rad;
+  const Rigid3d room_from_camera = predicted->room_from_model * out->body.camera_from_model.Inverse();
+  out->room_from_camera = room_from_camera;
+  camera_->SuggestPose(t, room_from_camera);
+  CorrectionUncertainty bound;
+  bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out->position_sigma_mm);
+  bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out->rotation_sigma_deg);
+  out->correction = ComputeCouchCorrection(*out->room_from_model, target_, bound, options_.tolerances);
+  // No measurement of the patient in the room this frame: never `in`.
+  if (out->correction.state == CorrectionState::kIn) out->correction.state = CorrectionState::kOut;
+  out->message = StringPrintf("camera not localised in the room (%s); patient pose carried by its motion over %.2f s",
+                              out->camera.message.c_str(), t - last_model_t_);
+  return true;
+}
 
 TrackedFrame Tracker::Process(const RgbdFrame& input) {
   const auto start = Clock::now();
@@ -159,6 +185,8 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
                                "patient %.1f mm)",
                                own_sigma_mm, out.camera.position_sigma_mm, out.camera.rotation_sigma_deg,
                                out.body.position_sigma_mm);
+  } else if (!out.camera.ok && out.body.ok && CarryByMotion(frame.timestamp_s, &out)) {
+    // Done: the patient's pose predicted, the camera implied by it.
   } else if (!out.camera.ok || !out.body.ok) {
     std::string why;
     if (!out.camera.ok) why = "camera not localised in the room" + (out.camera.message.empty() ? "" : " (" + out.camera.message + ")");

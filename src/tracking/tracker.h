@@ -16,7 +16,9 @@
 /// temporal filter (pose_filter.h) the reported pose and correction are the
 /// filtered ones, and a frame reads `in` only when both the filtered and the
 /// frame's own estimate, each with its bound, are within tolerance.
-/// A frame is lost when either half is lost; nothing is guessed.
+/// A frame is lost when either half is lost, except that a patient seen in a
+/// frame whose camera is not placed is carried by the filter's motion model
+/// for a moment (max_camera_carry_s; the frame says so and is never `in`).
 ///
 /// Thread-safety: one Tracker per stream; Process() is called from one thread.
 
@@ -58,6 +60,14 @@ struct TrackerOptions {
   /// each frame's uncertainty (pose_filter.h); false: each frame alone.
   bool temporal_filter = true;
   PoseFilterOptions filter;
+  /// A frame whose camera is not placed in the room while the patient is
+  /// seen in it (motion blur, no room marker, keypoints that do not agree):
+  /// the patient's room pose carried by the filter's motion model for at
+  /// most this long after the last placed frame (s), while the predicted
+  /// pose is within max_position_sigma_mm; the frame is `carried` and never
+  /// `in`, and the camera's pose implied by the patient seen in it is where
+  /// the localiser searches next. 0: such frames are lost.
+  double max_camera_carry_s = 0.35;
 
   std::string Validate() const;
 };
@@ -74,7 +84,8 @@ struct TrackingTimings {
 
 enum class TrackingState {
   kTracked = 0,   ///< camera and patient from this frame's data
-  kCarried = 1,   ///< patient carried on the surface without stickers
+  kCarried = 1,   ///< patient carried: on the surface without stickers, or by
+                  ///< its motion while the camera is not placed
   kLost = 2,      ///< no pose (camera or patient)
 };
 const char* TrackingStateName(TrackingState state);
@@ -127,6 +138,9 @@ class Tracker {
   const TrackerOptions& options() const { return options_; }
 
  private:
+  // The camera not placed, the patient seen: its room pose from the filter's
+  // motion model, if recent and certain enough (fills `out`; false: lost).
+  bool CarryByMotion(double t, TrackedFrame* out);
   TrackerOptions options_;
   Rigid3d target_;
   CameraIntrinsics intrinsics_;

@@ -52,6 +52,35 @@ TEST(PoseFilter, AnUncertainFrameBarelyMovesTheEstimate) {
   EXPECT_LT((f.room_from_model.translation - At(2.0).translation).norm(), 0.002);
 }
 
+// A prediction without a measurement: along the motion, less certain the
+// further ahead, none beyond the gap limit or before the start, and the
+// filter itself unchanged by it.
+TEST(PoseFilter, PredictsAlongTheMotionWithGrowingUncertaintyAndChangesNothing) {
+  PoseFilter filter, twin;
+  EXPECT_FALSE(filter.Predict(0.0).has_value());
+  for (int i = 0; i < 60; ++i) {
+    filter.Update(i / 30.0, At(i / 30.0), 0.001, 0.0005);
+    twin.Update(i / 30.0, At(i / 30.0), 0.001, 0.0005);
+  }
+  const double last = 59 / 30.0;
+  double previous_sigma = 0;
+  for (int k = 1; k <= 6; ++k) {
+    const double t = last + k / 30.0;
+    const std::optional<FilteredPose> p = filter.Predict(t);
+    ASSERT_TRUE(p.has_value()) << k;
+    EXPECT_LT((p->room_from_model.translation - At(t).translation).norm(), 1e-4) << k;
+    EXPECT_LT(p->room_from_model.rotation.angularDistance(At(t).rotation), 1e-4) << k;
+    EXPECT_GT(p->position_sigma_m, previous_sigma) << k;
+    previous_sigma = p->position_sigma_m;
+  }
+  EXPECT_FALSE(filter.Predict(last).has_value());
+  EXPECT_FALSE(filter.Predict(last + 0.6).has_value());  // beyond max_gap_s
+  const FilteredPose a = filter.Update(2.0, At(2.0), 0.001, 0.0005);
+  const FilteredPose b = twin.Update(2.0, At(2.0), 0.001, 0.0005);
+  EXPECT_EQ(a.room_from_model.translation, b.room_from_model.translation);
+  EXPECT_EQ(a.position_sigma_m, b.position_sigma_m);
+}
+
 TEST(PoseFilter, RestartsOnAJumpOrAGap) {
   PoseFilter filter;
   for (int i = 0; i < 60; ++i) filter.Update(i / 30.0, At(i / 30.0), 0.001, 0.0005);

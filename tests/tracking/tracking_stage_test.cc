@@ -30,7 +30,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct Frame {
-  std::string kind;  // normal, no_stickers, corrupt, no_depth, gap, empty
+  std::string kind;  // normal, no_stickers, no_room, corrupt, no_depth, gap, empty
 };
 
 class TrackingStage : public ::testing::Test {
@@ -86,6 +86,26 @@ class TrackingStage : public ::testing::Test {
       ++painted;
     }
     EXPECT_GE(painted, 2) << "the sample's first tracking frame should show stickers";
+    // The room hidden: everything outside the patient's silhouette box (the
+    // reference model's projected vertices, 20 px around) flat grey, the
+    // depth kept. The camera cannot be placed; the patient is in view.
+    cv::Mat no_room(a.color.size(), CV_8UC3, cv::Scalar(128, 128, 128));
+    {
+      cv::Rect2d box;
+      bool first = true;
+      for (const auto& v : inputs.model.vertices) {
+        const Eigen::Vector3d c = camera_from_model * v.cast<double>();
+        if (c.z() <= 0) continue;
+        const Eigen::Vector2d p = config.camera.Project(c);
+        const cv::Rect2d point(p.x(), p.y(), 0, 0);
+        box = first ? point : (box | point);
+        first = false;
+      }
+      const cv::Rect roi = cv::Rect(cv::Point(static_cast<int>(box.x) - 20, static_cast<int>(box.y) - 20),
+                                    cv::Point(static_cast<int>(box.br().x) + 20, static_cast<int>(box.br().y) + 20)) &
+                           cv::Rect(0, 0, a.color.cols, a.color.rows);
+      a.color(roi).copyTo(no_room(roi));
+    }
     const fs::path dir = case_ / "tracking" / name;
     fs::create_directories(dir / "rgb");
     fs::create_directories(dir / "depth");
@@ -102,6 +122,7 @@ class TrackingStage : public ::testing::Test {
       if (kinds[i] != "no_depth") depth << stamp << " " << depth_name << "\n";
       cv::Mat colour = a.color, d = a.depth;
       if (kinds[i] == "no_stickers") colour = no_stickers;
+      if (kinds[i] == "no_room") colour = no_room;
       if (kinds[i] == "empty") {
         colour = cv::Mat(a.color.size(), CV_8UC3, cv::Scalar(128, 128, 128));
         d = cv::Mat::zeros(a.depth.size(), CV_16UC1);
@@ -244,6 +265,55 @@ TEST_F(TrackingStage, BadFramesAreStatedAndTrackingRecovers) {
   int with_pose = 0;
   for (const auto& f : frames) with_pose += f.room_from_model.has_value();
   EXPECT_EQ(static_cast<int>(poses.size()), with_pose);
+}
+
+// Frames whose camera cannot be placed (the room hidden) while the patient is
+// in view: the patient's room pose is carried by the filter's motion model
+// for a moment and said so, never `in`; then lost; placed again when the room
+// is back.
+TEST_F(TrackingStage, APatientSeenWhileTheCameraIsNotPlacedIsCarriedForAMoment) {
+  const int settle = 20;  // the filter learns the (zero) velocity
+  std::vector<std::string> kinds(settle, "normal");
+  for (int i = 0; i < 14; ++i) kinds.push_back("no_room");  // 0.47 s at 30 fps
+  kinds.push_back("normal");
+  std::vector<double> stamps;
+  const fs::path seq = MakeSequence("no_room", kinds, &stamps);
+  auto database = SqliteDatabase::Open(store_.string());
+  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+  TrackSequenceOptions options;
+  options.sequence_dir = seq;
+  options.out_dir = root_ / "out_no_room";
+  options.tolerances.translation_mm = 200;  // wide enough that a measured frame reads `in`
+  options.tolerances.rotation_deg = 20;
+  const TrackSequenceResult result = TrackSequence(database.get(), inputs, config, options);
+  ASSERT_EQ(result.frames, static_cast<int>(kinds.size()));
+  const std::vector<TrackingFrameRecord> frames = database->GetTrackingFrames(result.run_id);
+  ASSERT_EQ(frames.size(), kinds.size());
+  const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
+  const Rigid3d truth = sample.BodyGroundTruth()->front().room_from_x;
+  for (int i = 0; i < settle; ++i) EXPECT_EQ(frames[i].source, "tracked") << "frame " << i << ": " << frames[i].note;
+  EXPECT_EQ(frames[settle - 1].status, TrackingFrameStatus::kInTolerance) << frames[settle - 1].note;
+  int carried = 0;
+  for (size_t i = settle; i + 1 < frames.size(); ++i) {
+    const auto& f = frames[i];
+    if (f.source == "lost") {
+      EXPECT_NE(f.note.find("camera not localised"), std::string::npos) << "frame " << i << ": " << f.note;
+      continue;
+    }
+    EXPECT_EQ(f.source, "carried") << "frame " << i << ": " << f.note;
+    EXPECT_EQ(carried, static_cast<int>(i) - settle) << "carried frames come first, then lost ones";
+    ++carried;
+    EXPECT_NE(f.note.find("carried by its motion"), std::string::npos) << f.note;
+    EXPECT_EQ(f.status, TrackingFrameStatus::kOutOfTolerance) << "frame " << i << ": no measurement, never in";
+    ASSERT_TRUE(f.room_from_model && f.room_from_camera) << "frame " << i;
+    const PoseError e = ComputePoseError(truth, *f.room_from_model);
+    EXPECT_LT(e.translation_mm, 5.0) << "frame " << i;
+    EXPECT_LT(e.rotation_deg, 0.5) << "frame " << i;
+    EXPECT_LT(stamps[i] - stamps[settle - 1], 0.35 + 1e-6) << "carried beyond the limit";
+  }
+  EXPECT_GE(carried, 3);
+  EXPECT_EQ(frames.back().source, "tracked") << frames.back().note;
 }
 
 TEST_F(TrackingStage, TrackCommandRefusesBadArgumentsAndStoresNothing) {
