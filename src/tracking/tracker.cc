@@ -57,7 +57,7 @@ Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> 
 
 Tracker::~Tracker() = default;
 
-bool Tracker::CarryByMotion(double t, TrackedFrame* out) {
+bool Tracker::CarryByMotion(double t, const std::string& why, TrackedFrame* out) {
   if (!options_.temporal_filter || !(options_.max_camera_carry_s > 0) || last_model_t_ < 0 ||
       !(t - last_model_t_ <= options_.max_camera_carry_s)) {
     return false;
@@ -68,6 +68,9 @@ bool Tracker::CarryByMotion(double t, TrackedFrame* out) {
   out->room_from_model = predicted->room_from_model;
   out->position_sigma_mm = 1000 * predicted->position_sigma_m;
   out->rotation_sigma_deg = kDegPerRad * predicted->rotation_sigma_rad;
+  // The camera where the patient seen in it puts it: the pose the overlay
+  // draws with (the red model on the patient), and where the localiser
+  // searches next if it lost this frame.
   const Rigid3d room_from_camera = predicted->room_from_model * out->body.camera_from_model.Inverse();
   out->room_from_camera = room_from_camera;
   camera_->SuggestPose(t, room_from_camera);
@@ -77,8 +80,7 @@ bool Tracker::CarryByMotion(double t, TrackedFrame* out) {
   out->correction = ComputeCouchCorrection(*out->room_from_model, target_, bound, options_.tolerances);
   // No measurement of the patient in the room this frame: never `in`.
   if (out->correction.state == CorrectionState::kIn) out->correction.state = CorrectionState::kOut;
-  out->message = StringPrintf("camera not localised in the room (%s); patient pose carried by its motion over %.2f s",
-                              out->camera.message.c_str(), t - last_model_t_);
+  out->message = StringPrintf("pose predicted %.2f s ahead by its motion; ", t - last_model_t_) + why;
   return true;
 }
 
@@ -181,11 +183,17 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
                              std::pow(out.body.position_sigma_mm, 2));
   }
   if (out.camera.ok && out.body.ok && own_sigma_mm > options_.max_position_sigma_mm) {
-    out.message = StringPrintf("pose too uncertain: %.1f mm at the isocentre (1 sigma; camera %.1f mm, %.2f deg; "
-                               "patient %.1f mm)",
-                               own_sigma_mm, out.camera.position_sigma_mm, out.camera.rotation_sigma_deg,
-                               out.body.position_sigma_mm);
-  } else if (!out.camera.ok && out.body.ok && CarryByMotion(frame.timestamp_s, &out)) {
+    const std::string why =
+        StringPrintf("pose too uncertain: %.1f mm at the isocentre (1 sigma; camera %.1f mm, %.2f deg; "
+                     "patient %.1f mm)",
+                     own_sigma_mm, out.camera.position_sigma_mm, out.camera.rotation_sigma_deg,
+                     out.body.position_sigma_mm);
+    if (!CarryByMotion(frame.timestamp_s, why, &out)) out.message = why;
+  } else if (!out.camera.ok && out.body.ok &&
+             CarryByMotion(frame.timestamp_s,
+                           "camera not localised in the room" +
+                               (out.camera.message.empty() ? "" : " (" + out.camera.message + ")"),
+                           &out)) {
     // Done: the patient's pose predicted, the camera implied by it.
   } else if (!out.camera.ok || !out.body.ok) {
     std::string why;

@@ -60,8 +60,9 @@ struct TrackerOptions {
   /// each frame's uncertainty (pose_filter.h); false: each frame alone.
   bool temporal_filter = true;
   PoseFilterOptions filter;
-  /// A frame whose camera is not placed in the room while the patient is
-  /// seen in it (motion blur, no room marker, keypoints that do not agree):
+  /// A frame whose camera is not placed in the room, or too uncertainly
+  /// (max_position_sigma_mm), while the patient is seen in it (motion blur,
+  /// no room marker, keypoints that do not agree):
   /// the patient's room pose carried by the filter's motion model for at
   /// most this long after the last placed frame (s), while the predicted
   /// pose is within max_position_sigma_mm; the frame is `carried` and never
@@ -138,9 +139,10 @@ class Tracker {
   const TrackerOptions& options() const { return options_; }
 
  private:
-  // The camera not placed, the patient seen: its room pose from the filter's
-  // motion model, if recent and certain enough (fills `out`; false: lost).
-  bool CarryByMotion(double t, TrackedFrame* out);
+  // The camera not placed (or too uncertain: `why`), the patient seen: its
+  // room pose from the filter's motion model, if recent and certain enough
+  // (fills `out`; false: lost).
+  bool CarryByMotion(double t, const std::string& why, TrackedFrame* out);
   TrackerOptions options_;
   Rigid3d target_;
   CameraIntrinsics intrinsics_;
