@@ -156,6 +156,9 @@ struct BodyPoseResult {
   int frames_without_stickers = 0;
   std::string message;  ///< why, when lost or carried
   BodyTrackingTimings timings;
+  /// Internal: lost on one sticker whose pose disagrees with the surface,
+  /// while a prediction was at hand (Track tries again from it).
+  bool retry_from_prediction = false;
 };
 
 class BodyTracker {
@@ -185,6 +188,10 @@ class BodyTracker {
   const BodyTrackerOptions& options() const { return options_; }
 
  private:
+  // One attempt; `ignore_detections`: start from the prediction as if no
+  // sticker had been read (the stickers are then refined where the surface
+  // fit puts them).
+  BodyPoseResult TrackOnce(const RgbdFrame& frame, const std::optional<Rigid3d>& hint, bool ignore_detections);
   struct Impl;
   BodyTrackerOptions options_;
   std::unique_ptr<Impl> impl_;
