@@ -129,6 +129,8 @@ struct CameraLocalizer::Impl {
   bool have_last = false, have_prev = false;
   Rigid3d last_camera_from_room, prev_camera_from_room;
   double last_t = 0, prev_t = 0;
+  // A caller's start for the next relocalisation (SuggestSearchStart).
+  std::optional<Rigid3d> search_start;
 
   Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
       : map(m), K(k), options(o), extractor(o.keypoints) {
@@ -513,15 +515,11 @@ void CameraLocalizer::Reset() {
   impl_->frames_lost = 1 << 20;
   impl_->last_markers_used = 0;
   impl_->last_keypoints_used = 0;
+  impl_->search_start.reset();
 }
 
-void CameraLocalizer::SuggestPose(double t, const Rigid3d& room_from_camera) {
-  Impl& m = *impl_;
-  if (m.frames_lost == 0 || (m.have_last && !(t > m.last_t)) || m.frames_lost > options_.recent_pose_max_frames) return;
-  m.last_camera_from_room = room_from_camera.Inverse();
-  m.last_t = t;
-  m.have_last = true;
-  m.have_prev = m.have_cov = false;
+void CameraLocalizer::SuggestSearchStart(const Rigid3d& room_from_camera) {
+  impl_->search_start = room_from_camera.Inverse();
 }
 
 LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame) { return Run(frame, nullptr); }
@@ -560,6 +558,8 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   Lap(&mark, &tm.keypoints_ms);
 
   const std::optional<Rigid3d> predicted = m.Predict(frame.timestamp_s);
+  const std::optional<Rigid3d> search_start = m.search_start;  // this frame's only
+  m.search_start.reset();
   m.markers.clear();
   m.marker_px.clear();
   m.marker_depth.clear();
@@ -646,7 +646,13 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       m.SampleMarkerDepths();
       Lap(&mark, &tm.detection_ms);
     }
-    if (options_.use_keypoints && m.have_last && m.frames_lost <= options_.recent_pose_max_frames) {
+    if (options_.use_keypoints && search_start) {
+      refined = m.Track(*search_start, options_.wide_search_radius_px, std::nullopt, &tm.matching_ms,
+                        &tm.refinement_ms, &mark);
+      ok = m.Accept(refined, false, &out);
+      if (ok) out.status = LocalizationStatus::kRelocalized;
+    }
+    if (!ok && options_.use_keypoints && m.have_last && m.frames_lost <= options_.recent_pose_max_frames) {
       refined = m.Track(m.last_camera_from_room, options_.wide_search_radius_px, std::nullopt, &tm.matching_ms,
                         &tm.refinement_ms, &mark);
       ok = m.Accept(refined, false, &out);

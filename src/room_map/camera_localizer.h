@@ -230,12 +230,13 @@ class CameraLocalizer {
 
   /// Forgets the motion model: the next frame is relocalised.
   void Reset();
-  /// After a frame this localiser lost: where the camera was at `t` (s) by
-  /// other means (e.g. the patient seen in the frame and its predicted room
-  /// pose). The next frames search from there instead of from the last pose
-  /// this localiser found; nothing else changes (still lost, no velocity, no
-  /// covariance). Ignored after a localised frame or for an older `t`.
-  void SuggestPose(double t, const Rigid3d& room_from_camera);
+  /// Where the camera is about to be by other means (e.g. the patient seen
+  /// in the last frame and its room pose predicted or expected): if the
+  /// next frame must be relocalised, the landmarks are first searched
+  /// around this pose (the wide radius), before the whole map. A start
+  /// only: the pose found must pass the same acceptance, and the last pose
+  /// this localiser found stays its reference. Used by one frame.
+  void SuggestSearchStart(const Rigid3d& room_from_camera);
 
   const RoomMap& map() const { return map_; }
   const CameraLocalizerOptions& options() const { return options_; }

@@ -73,7 +73,7 @@ bool Tracker::CarryByMotion(double t, const std::string& why, TrackedFrame* out)
   // searches next if it lost this frame.
   const Rigid3d room_from_camera = predicted->room_from_model * out->body.camera_from_model.Inverse();
   out->room_from_camera = room_from_camera;
-  camera_->SuggestPose(t, room_from_camera);
+  camera_->SuggestSearchStart(room_from_camera);
   CorrectionUncertainty bound;
   bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out->position_sigma_mm);
   bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out->rotation_sigma_deg);
@@ -204,6 +204,15 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     }
     if (!depth_note.empty()) why += "; " + depth_note;
     out.message = why;
+    if (!out.camera.ok && out.body.ok) {
+      // The patient seen, the camera not placed: the next relocalisation
+      // searches first where the patient's last (or expected) room pose
+      // puts the camera (measured on a case with random conditions: the
+      // first 18 frames lost to the whole-map search).
+      const bool recent = last_room_from_model_ && frame.timestamp_s - last_model_t_ < 5.0;
+      const std::optional<Rigid3d> room_from_model = recent ? last_room_from_model_ : expected_room_from_model_;
+      if (room_from_model) camera_->SuggestSearchStart(*room_from_model * out.body.camera_from_model.Inverse());
+    }
   } else {
     out.room_from_model = out.camera.room_from_camera * out.body.camera_from_model;
     last_room_from_model_ = out.room_from_model;
