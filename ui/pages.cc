@@ -702,13 +702,19 @@ void SessionPage::ShowSession(int row) {
   UpdateButtons();
   if (!state_->database || row < 0 || !sessions_->item(row, 0)) return;
   const SessionId session(sessions_->item(row, 0)->text().toLongLong());
+  std::string notes;
   if (const auto record = state_->database->GetSession(session)) {
     shown_session_ = session.value();
     shown_session_open_ = record->status == SessionStatus::kOpen;
+    notes = record->notes;
   }
   UpdateButtons();
   const PlanId plan_id(sessions_->item(row, 1)->text().toLongLong());
   QStringList lines;
+  // What the session stage said of its recording (how well the body scan
+  // is placed in the room, warnings with what to record): as the report
+  // shows it, on top.
+  if (!notes.empty()) lines << tr("Notes: %1").arg(Q(notes));
   const auto plan = state_->database->GetPlan(plan_id);
   TriangleMesh model;
   if (plan) model = FromStoredMesh(plan->reference_model);
