@@ -363,16 +363,23 @@ void BodyTracker::Reset() {
 
 BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint) {
   const int frames_without_stickers = impl_->frames_without_stickers;
-  BodyPoseResult first = TrackOnce(frame, hint, false);
-  if (first.ok || !first.retry_from_prediction) return first;
-  // One sticker read, and its pose put the model off the surface: a single
-  // small sticker's pose is poorly determined (its two IPPE solutions, a
-  // blurred corner), while the prediction is a few millimetres off. Again
-  // from the prediction, the stickers refined where the surface puts them
-  // (measured on a case with random conditions: 1-sticker frames fitted
-  // with 28 of ~800 depth points, lost; from the prediction 2-3 stickers).
+  BodyPoseResult first = TrackOnce(frame, hint, Search::kWindows);
+  if (first.ok || first.retry == 0) return first;
+  // 1: one sticker read, and its pose put the model off the surface: a
+  // single small sticker's pose is poorly determined (its two IPPE
+  // solutions, a blurred corner), while the prediction is a few millimetres
+  // off. Again from the prediction, the stickers refined where the surface
+  // puts them (measured on a case with random conditions: 1-sticker frames
+  // fitted with 28 of ~800 depth points, lost; from the prediction 2-3
+  // stickers). 2: no window held a sticker and the surface alone did not
+  // hold: the prediction may be off after a jerk of the camera; the whole
+  // image (measured on a case with random conditions: 7 frames lost with
+  // 20 px stickers in plain view). Only then: most frames' stickers are too
+  // small for ArUco anyway and the surface places them; the whole image on
+  // every such frame took the body's detection from 2.1 to 6.1 ms (640x480)
+  // and from 4.1 to 11.9 ms (1280x720) a frame on average (tracking_bench).
   impl_->frames_without_stickers = frames_without_stickers;
-  BodyPoseResult second = TrackOnce(frame, hint, true);
+  BodyPoseResult second = TrackOnce(frame, hint, first.retry == 1 ? Search::kNone : Search::kWholeImage);
   second.timings.detection_ms += first.timings.detection_ms;
   second.timings.pose_ms += first.timings.pose_ms;
   second.timings.total_ms += first.timings.total_ms;
@@ -383,7 +390,7 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
 }
 
 BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optional<Rigid3d>& hint,
-                                      bool ignore_detections) {
+                                      Search search) {
   const auto start = Clock::now();
   Impl& m = *impl_;
   const BodyTrackerOptions& o = options_;
@@ -426,12 +433,9 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   const auto t_detect = Clock::now();
   cv::cvtColor(frame.color, m.gray, cv::COLOR_BGR2GRAY);
   std::vector<MarkerObservation> found;
-  if (predicted && !ignore_detections) m.SearchAround(*predicted, o, &found);
-  // No window holds a sticker: the whole image too (the prediction may be
-  // off after a jerk of the camera; measured on a case with random
-  // conditions: 7 frames lost with 20 px stickers in plain view, the
-  // windows searched where the last poses put them).
-  const bool whole_image = found.empty() && !ignore_detections;
+  if (predicted && search == Search::kWindows) m.SearchAround(*predicted, o, &found);
+  const bool whole_image = search == Search::kWholeImage ||
+                           (search == Search::kWindows && found.empty() && (!predicted || from_hint));
   if (whole_image) {
     m.detector->Detect(m.gray, &m.scratch);
     found = m.scratch;
@@ -506,6 +510,9 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   };
 
   std::vector<SeenSticker> stickers = make_stickers(found);
+  // No window around the predicted stickers held one: if this attempt fails,
+  // the whole image is searched (Track).
+  const bool windows_empty = search == Search::kWindows && predicted && !from_hint && stickers.empty();
   std::optional<Rigid3d> start_pose;
   if (!stickers.empty()) {
     start_pose = choose_start(stickers);
@@ -531,6 +538,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
                             << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
   if (!start_pose) {
+    if (windows_empty) result.retry = 2;
     result.message = stickers.empty() ? "no sticker in view" : "no sticker pose";
     result.timings.pose_ms = MsSince(t_pose);
     return finish(result);
@@ -757,7 +765,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
     accept = surface_ok;
     if (!accept) {
       result.message = "one sticker and too little surface in depth";
-      result.retry_from_prediction = predicted && !from_hint && have_depth && !ignore_detections;
+      if (predicted && !from_hint && have_depth && search == Search::kWindows) result.retry = 1;
     }
   } else if (carried) {
     accept = surface_ok && !from_hint && m.frames_without_stickers < o.max_frames_without_stickers;
@@ -776,6 +784,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   if (!pose.translation.allFinite() || pose.translation.z() <= 0) accept = false;
   if (!accept) {
     if (result.message.empty()) result.message = "rejected";
+    if (windows_empty && result.retry == 0) result.retry = 2;
     return finish(result);
   }
   result.ok = true;

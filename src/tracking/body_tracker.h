@@ -156,9 +156,11 @@ struct BodyPoseResult {
   int frames_without_stickers = 0;
   std::string message;  ///< why, when lost or carried
   BodyTrackingTimings timings;
-  /// Internal: lost on one sticker whose pose disagrees with the surface,
-  /// while a prediction was at hand (Track tries again from it).
-  bool retry_from_prediction = false;
+  /// Internal: how Track may try again when this attempt lost the patient
+  /// (0: no; 1: from the prediction, ignoring the one sticker read, whose
+  /// pose disagreed with the surface; 2: with the whole image searched, no
+  /// window around the predicted stickers having held one).
+  int retry = 0;
 };
 
 class BodyTracker {
@@ -188,10 +190,14 @@ class BodyTracker {
   const BodyTrackerOptions& options() const { return options_; }
 
  private:
-  // One attempt; `ignore_detections`: start from the prediction as if no
-  // sticker had been read (the stickers are then refined where the surface
-  // fit puts them).
-  BodyPoseResult TrackOnce(const RgbdFrame& frame, const std::optional<Rigid3d>& hint, bool ignore_detections);
+  // One attempt. How stickers are looked for: kWindows around the
+  // prediction (the whole image when there is none, or only a hint, and
+  // the windows hold none); kNone: start from the prediction as if no
+  // sticker had been read (they are then refined where the surface fit puts
+  // them); kWholeImage: the whole image, then windows where its first pose
+  // puts every sticker.
+  enum class Search { kWindows, kNone, kWholeImage };
+  BodyPoseResult TrackOnce(const RgbdFrame& frame, const std::optional<Rigid3d>& hint, Search search);
   struct Impl;
   BodyTrackerOptions options_;
   std::unique_ptr<Impl> impl_;
