@@ -185,6 +185,16 @@ struct LocalizationTimings {
   double pnp_ms = 0;         ///< relocalisation hypotheses (IPPE / PnP RANSAC)
   double refinement_ms = 0;  ///< joint non-linear refinement(s)
   double total_ms = 0;
+  /// Step by step sum (two localisations of one frame).
+  LocalizationTimings& operator+=(const LocalizationTimings& o) {
+    detection_ms += o.detection_ms;
+    keypoints_ms += o.keypoints_ms;
+    matching_ms += o.matching_ms;
+    pnp_ms += o.pnp_ms;
+    refinement_ms += o.refinement_ms;
+    total_ms += o.total_ms;
+    return *this;
+  }
 };
 
 struct LocalizationResult {

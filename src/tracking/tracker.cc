@@ -57,6 +57,11 @@ Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> 
 
 Tracker::~Tracker() = default;
 
+std::optional<Rigid3d> Tracker::KnownRoomFromModel(double t) const {
+  if (last_room_from_model_ && t - last_model_t_ < 5.0) return last_room_from_model_;
+  return expected_room_from_model_;
+}
+
 bool Tracker::CarryByMotion(double t, const std::string& why, TrackedFrame* out) {
   if (!options_.temporal_filter || !(options_.max_camera_carry_s > 0) || last_model_t_ < 0 ||
       !(t - last_model_t_ <= options_.max_camera_carry_s)) {
@@ -127,11 +132,9 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   // Before the patient is first found (or long after it was last seen),
   // where it is expected.
   auto hint_from = [&](const Rigid3d& room_from_camera) -> std::optional<Rigid3d> {
-    if (last_room_from_model_ && frame.timestamp_s - last_model_t_ < 5.0) {
-      return room_from_camera.Inverse() * *last_room_from_model_;
-    }
-    if (expected_room_from_model_) return room_from_camera.Inverse() * *expected_room_from_model_;
-    return std::nullopt;
+    const std::optional<Rigid3d> room_from_model = KnownRoomFromModel(frame.timestamp_s);
+    if (!room_from_model) return std::nullopt;
+    return room_from_camera.Inverse() * *room_from_model;
   };
   std::optional<Rigid3d> hint;
   if (last_room_from_camera_ && frame.timestamp_s - last_camera_t_ < 0.5) hint = hint_from(*last_room_from_camera_);
@@ -149,8 +152,7 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       out.camera = run_camera();
       if (out.camera.ok) hint = hint_from(out.camera.room_from_camera);
       out.body = run_body();
-      const bool recent = last_room_from_model_ && frame.timestamp_s - last_model_t_ < 5.0;
-      const std::optional<Rigid3d> room_from_model = recent ? last_room_from_model_ : expected_room_from_model_;
+      const std::optional<Rigid3d> room_from_model = KnownRoomFromModel(frame.timestamp_s);
       if (!out.camera.ok && out.body.ok && room_from_model) {
         // The room not recognised from scratch, the patient found: the
         // camera again, searched first where the patient's last (or
@@ -161,12 +163,7 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
         camera_->SuggestSearchStart(*room_from_model * out.body.camera_from_model.Inverse());
         out.camera = run_camera();
         out.timings.camera_ms += first_ms;
-        out.camera.timings.detection_ms += first_steps.detection_ms;
-        out.camera.timings.keypoints_ms += first_steps.keypoints_ms;
-        out.camera.timings.matching_ms += first_steps.matching_ms;
-        out.camera.timings.pnp_ms += first_steps.pnp_ms;
-        out.camera.timings.refinement_ms += first_steps.refinement_ms;
-        out.camera.timings.total_ms += first_steps.total_ms;
+        out.camera.timings += first_steps;
       }
     } else if (options_.parallel) {
       std::future<BodyPoseResult> body = std::async(std::launch::async, run_body);
@@ -228,8 +225,7 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       // searches first where the patient's last (or expected) room pose
       // puts the camera (measured on a case with random conditions: the
       // first 18 frames lost to the whole-map search).
-      const bool recent = last_room_from_model_ && frame.timestamp_s - last_model_t_ < 5.0;
-      const std::optional<Rigid3d> room_from_model = recent ? last_room_from_model_ : expected_room_from_model_;
+      const std::optional<Rigid3d> room_from_model = KnownRoomFromModel(frame.timestamp_s);
       if (room_from_model) camera_->SuggestSearchStart(*room_from_model * out.body.camera_from_model.Inverse());
     }
   } else {

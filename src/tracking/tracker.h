@@ -139,6 +139,9 @@ class Tracker {
   const TrackerOptions& options() const { return options_; }
 
  private:
+  // Where the patient is in the room as far as this tracker knows at time
+  // `t`: its last measured pose if recent (5 s), else where it is expected.
+  std::optional<Rigid3d> KnownRoomFromModel(double t) const;
   // The camera not placed (or too uncertain: `why`), the patient seen: its
   // room pose from the filter's motion model, if recent and certain enough
   // (fills `out`; false: lost).
