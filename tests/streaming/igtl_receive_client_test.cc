@@ -239,7 +239,7 @@ int FreePort() {
 }
 
 // The whole live path as a clinic would run it: `arpos track --source sim:`
-// (the simulator as a live camera at 30 fps) streaming to OpenIGTLink's
+// (the simulator as a live camera at 10 fps) streaming to OpenIGTLink's
 // example client in its own process; every ModelToRoom and CameraToRoom the
 // client printed is the pose arpos wrote to poses.txt / camera_poses.txt for
 // that frame, in millimetres, and every tracked frame has its STATUS.
@@ -257,7 +257,10 @@ TEST(IgtlReceiveClient, LiveTrackingStreamsThePosesOfPosesTxt) {
   }
   const int port = FreePort();
   const std::string track_log = (dir / "track.log").string();
-  ChildProcess track({ARPOS_EXECUTABLE, "track", "--source", "sim:" + sample + "?frames=30&fps=30", "--case", sample,
+  // 10 fps: the tracker keeps up even on a machine busy with other work (at
+  // 30 fps, with two measurement jobs beside the test suite, 17 of 30 frames
+  // were dropped); what is checked is what reaches the client.
+  ChildProcess track({ARPOS_EXECUTABLE, "track", "--source", "sim:" + sample + "?frames=30&fps=10", "--case", sample,
                       "--store", store, "--out", (dir / "out").string(), "--igtl-port", std::to_string(port),
                       "--igtl-wait"},
                      track_log);
