@@ -22,7 +22,10 @@
 ///     off, misread) is dropped and the fit repeated;
 ///  5. acceptance: two stickers, or one with the surface, or, for at most
 ///     `max_frames_without_stickers` frames, the surface alone from the
-///     predicted pose ("carried", and said so); otherwise the patient is lost
+///     predicted pose ("carried", and said so). A frame that fails so while
+///     tracking is tried once more: from the prediction alone when one
+///     sticker's pose put the model off the surface, with the whole image
+///     searched when no window held a sticker. Otherwise the patient is lost
 ///     and nothing is guessed.
 /// The pose's covariance comes from the refinement's information matrix,
 /// scaled up by the residuals when they exceed their sigmas.
