@@ -137,6 +137,30 @@ class TrackingStage : public ::testing::Test {
     return dir;
   }
 
+  // MakeSequence, then the tracking stage over it into out_<name>, with
+  // `tolerances`; the run's stored frames in `frames`.
+  struct Run {
+    std::vector<double> stamps;
+    TrackingInputs inputs;
+    TrackSequenceOptions options;
+    TrackSequenceResult result;
+    std::vector<TrackingFrameRecord> frames;
+  };
+  static Run TrackMadeSequence(const std::string& name, const std::vector<std::string>& kinds,
+                               const CouchTolerances& tolerances = {}) {
+    Run run;
+    const fs::path seq = MakeSequence(name, kinds, &run.stamps);
+    auto database = SqliteDatabase::Open(store_.string());
+    run.inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+    const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+    run.options.sequence_dir = seq;
+    run.options.out_dir = root_ / ("out_" + name);
+    run.options.tolerances = tolerances;
+    run.result = TrackSequence(database.get(), run.inputs, config, run.options);
+    run.frames = database->GetTrackingFrames(run.result.run_id);
+    return run;
+  }
+
   static fs::path root_, case_, store_;
 };
 fs::path TrackingStage::root_, TrackingStage::case_, TrackingStage::store_;
@@ -182,18 +206,11 @@ TEST_F(TrackingStage, BadFramesAreStatedAndTrackingRecovers) {
                                           "no_stickers", "no_stickers", "no_stickers", "no_stickers",
                                           "no_stickers", "normal",      "corrupt",     "no_depth",
                                           "gap",         "empty",       "normal"};
-  std::vector<double> stamps;
-  const fs::path seq = MakeSequence("bad_frames", kinds, &stamps);
-  auto database = SqliteDatabase::Open(store_.string());
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
-  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
-  TrackSequenceOptions options;
-  options.sequence_dir = seq;
-  options.out_dir = root_ / "out_bad_frames";
-  const TrackSequenceResult result = TrackSequence(database.get(), inputs, config, options);
-  ASSERT_EQ(result.frames, static_cast<int>(kinds.size()));
-
-  const std::vector<TrackingFrameRecord> frames = database->GetTrackingFrames(result.run_id);
+  const Run run = TrackMadeSequence("bad_frames", kinds);
+  const TrackingInputs& inputs = run.inputs;
+  const TrackSequenceOptions& options = run.options;
+  ASSERT_EQ(run.result.frames, static_cast<int>(kinds.size()));
+  const std::vector<TrackingFrameRecord>& frames = run.frames;
   ASSERT_EQ(frames.size(), kinds.size());
   std::vector<std::string> sources;
   for (const auto& f : frames) sources.push_back(f.source);
@@ -276,19 +293,13 @@ TEST_F(TrackingStage, APatientSeenWhileTheCameraIsNotPlacedIsCarriedForAMoment) 
   std::vector<std::string> kinds(settle, "normal");
   for (int i = 0; i < 14; ++i) kinds.push_back("no_room");  // 0.47 s at 30 fps
   kinds.push_back("normal");
-  std::vector<double> stamps;
-  const fs::path seq = MakeSequence("no_room", kinds, &stamps);
-  auto database = SqliteDatabase::Open(store_.string());
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
-  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
-  TrackSequenceOptions options;
-  options.sequence_dir = seq;
-  options.out_dir = root_ / "out_no_room";
-  options.tolerances.translation_mm = 200;  // wide enough that a measured frame reads `in`
-  options.tolerances.rotation_deg = 20;
-  const TrackSequenceResult result = TrackSequence(database.get(), inputs, config, options);
-  ASSERT_EQ(result.frames, static_cast<int>(kinds.size()));
-  const std::vector<TrackingFrameRecord> frames = database->GetTrackingFrames(result.run_id);
+  CouchTolerances wide;  // wide enough that a measured frame reads `in`
+  wide.translation_mm = 200;
+  wide.rotation_deg = 20;
+  const Run run = TrackMadeSequence("no_room", kinds, wide);
+  const std::vector<double>& stamps = run.stamps;
+  ASSERT_EQ(run.result.frames, static_cast<int>(kinds.size()));
+  const std::vector<TrackingFrameRecord>& frames = run.frames;
   ASSERT_EQ(frames.size(), kinds.size());
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
   const Rigid3d truth = sample.BodyGroundTruth()->front().room_from_x;
