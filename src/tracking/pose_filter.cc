@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "geometry/so3.h"
 #include "util/check.h"
 
 namespace arpos {
@@ -45,10 +46,7 @@ std::optional<FilteredPose> PoseFilter::Predict(double t) const {
     max_p = std::max(max_p, p.pxx);
     max_r = std::max(max_r, r.pxx);
   }
-  const double angle = rv.norm();
-  const Eigen::Quaterniond delta =
-      angle > 0 ? Eigen::Quaterniond(Eigen::AngleAxisd(angle, rv / angle)) : Eigen::Quaterniond::Identity();
-  out.room_from_model = Rigid3d((delta * rotation_).normalized(), position);
+  out.room_from_model = Rigid3d((QuaternionFromRotationVector(rv) * rotation_).normalized(), position);
   out.position_sigma_m = std::sqrt(max_p);
   out.rotation_sigma_rad = std::sqrt(max_r);
   return out;

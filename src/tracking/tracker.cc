@@ -57,6 +57,13 @@ Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> 
 
 Tracker::~Tracker() = default;
 
+CorrectionUncertainty Tracker::BoundOf(double position_sigma_mm, double rotation_sigma_deg) const {
+  CorrectionUncertainty bound;
+  bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * position_sigma_mm);
+  bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * rotation_sigma_deg);
+  return bound;
+}
+
 std::optional<Rigid3d> Tracker::KnownRoomFromModel(double t) const {
   if (last_room_from_model_ && t - last_model_t_ < 5.0) return last_room_from_model_;
   return expected_room_from_model_;
@@ -79,10 +86,8 @@ bool Tracker::CarryByMotion(double t, const std::string& why, TrackedFrame* out)
   const Rigid3d room_from_camera = predicted->room_from_model * out->body.camera_from_model.Inverse();
   out->room_from_camera = room_from_camera;
   camera_->SuggestSearchStart(room_from_camera);
-  CorrectionUncertainty bound;
-  bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out->position_sigma_mm);
-  bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out->rotation_sigma_deg);
-  out->correction = ComputeCouchCorrection(*out->room_from_model, target_, bound, options_.tolerances);
+  out->correction = ComputeCouchCorrection(*out->room_from_model, target_,
+                                          BoundOf(out->position_sigma_mm, out->rotation_sigma_deg), options_.tolerances);
   // No measurement of the patient in the room this frame: never `in`.
   if (out->correction.state == CorrectionState::kIn) out->correction.state = CorrectionState::kOut;
   out->message = StringPrintf("pose predicted %.2f s ahead by its motion; ", t - last_model_t_) + why;
@@ -191,6 +196,9 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   // The frame's own uncertainty at the isocentre: the camera's position
   // error, its rotation error swinging the isocentre at its distance, and
   // the body's.
+  auto camera_failure = [&] {
+    return "camera not localised in the room" + (out.camera.message.empty() ? "" : " (" + out.camera.message + ")");
+  };
   double own_sigma_mm = 0;
   if (out.camera.ok && out.body.ok) {
     const double distance_m = out.body.camera_from_model.translation.norm();
@@ -205,15 +213,11 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
                      own_sigma_mm, out.camera.position_sigma_mm, out.camera.rotation_sigma_deg,
                      out.body.position_sigma_mm);
     if (!CarryByMotion(frame.timestamp_s, why, &out)) out.message = why;
-  } else if (!out.camera.ok && out.body.ok &&
-             CarryByMotion(frame.timestamp_s,
-                           "camera not localised in the room" +
-                               (out.camera.message.empty() ? "" : " (" + out.camera.message + ")"),
-                           &out)) {
+  } else if (!out.camera.ok && out.body.ok && CarryByMotion(frame.timestamp_s, camera_failure(), &out)) {
     // Done: the patient's pose predicted, the camera implied by it.
   } else if (!out.camera.ok || !out.body.ok) {
     std::string why;
-    if (!out.camera.ok) why = "camera not localised in the room" + (out.camera.message.empty() ? "" : " (" + out.camera.message + ")");
+    if (!out.camera.ok) why = camera_failure();
     if (!out.body.ok) {
       why += (why.empty() ? "" : "; ") + std::string("patient not found") +
              (out.body.message.empty() ? "" : " (" + out.body.message + ")");
@@ -245,16 +249,12 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       out.position_sigma_mm = 1000 * f.position_sigma_m;
       out.rotation_sigma_deg = kDegPerRad * f.rotation_sigma_rad;
     }
-    CorrectionUncertainty bound;
-    bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out.position_sigma_mm);
-    bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out.rotation_sigma_deg);
-    out.correction = ComputeCouchCorrection(*out.room_from_model, target_, bound, options_.tolerances);
+    out.correction = ComputeCouchCorrection(*out.room_from_model, target_,
+                                            BoundOf(out.position_sigma_mm, out.rotation_sigma_deg), options_.tolerances);
     // `in` only when this frame's own estimate agrees: the filter's bound
     // holds only as long as its motion model does.
     if (options_.temporal_filter && out.correction.state == CorrectionState::kIn) {
-      CorrectionUncertainty own;
-      own.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * out.measured_position_sigma_mm);
-      own.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * out.measured_rotation_sigma_deg);
+      const CorrectionUncertainty own = BoundOf(out.measured_position_sigma_mm, out.measured_rotation_sigma_deg);
       if (ComputeCouchCorrection(*out.measured_room_from_model, target_, own, options_.tolerances).state != CorrectionState::kIn) {
         out.correction.state = CorrectionState::kOut;
       }

@@ -139,6 +139,9 @@ class Tracker {
   const TrackerOptions& options() const { return options_; }
 
  private:
+  // The correction's bound: `uncertainty_sigmas` of the pose's 1-sigma
+  // uncertainty, at least the floors.
+  CorrectionUncertainty BoundOf(double position_sigma_mm, double rotation_sigma_deg) const;
   // Where the patient is in the room as far as this tracker knows at time
   // `t`: its last measured pose if recent (5 s), else where it is expected.
   std::optional<Rigid3d> KnownRoomFromModel(double t) const;

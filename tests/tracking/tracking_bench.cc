@@ -154,7 +154,8 @@ void Track(benchmark::State& state, const BenchData& data, bool parallel) {
     body_pose_ms += result.timings.body.pose_ms;
     combine_ms += result.timings.combine_ms;
     totals.push_back(total_ms);
-    (i == 0 ? first_frame_max_ms : later_max_ms) = std::max(i == 0 ? first_frame_max_ms : later_max_ms, total_ms);
+    double& max_ms = i == 0 ? first_frame_max_ms : later_max_ms;
+    max_ms = std::max(max_ms, total_ms);
     if (result.room_from_model) {
       ++tracked;
       tracked_totals.push_back(total_ms);
