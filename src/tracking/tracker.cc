@@ -28,6 +28,10 @@ std::string TrackerOptions::Validate() const {
   if (!(uncertainty_floor_mm >= 0) || !(uncertainty_floor_deg >= 0)) return "uncertainty floors must not be negative";
   if (!(max_position_sigma_mm > 0)) return "max_position_sigma_mm must be positive";
   if (!(max_camera_carry_s >= 0)) return "max_camera_carry_s must not be negative";
+  if (!(room_frame_position_sigma_mm >= 0 && std::isfinite(room_frame_position_sigma_mm)) ||
+      !(room_frame_rotation_sigma_deg >= 0 && std::isfinite(room_frame_rotation_sigma_deg))) {
+    return "the room frame's sigmas must be finite and not negative";
+  }
   problem = filter.Validate();
   if (!problem.empty()) return "filter: " + problem;
   return "";
@@ -59,8 +63,12 @@ Tracker::~Tracker() = default;
 
 CorrectionUncertainty Tracker::BoundOf(double position_sigma_mm, double rotation_sigma_deg) const {
   CorrectionUncertainty bound;
-  bound.translation_mm = std::max(options_.uncertainty_floor_mm, options_.uncertainty_sigmas * position_sigma_mm);
-  bound.rotation_deg = std::max(options_.uncertainty_floor_deg, options_.uncertainty_sigmas * rotation_sigma_deg);
+  bound.translation_mm =
+      std::max(options_.uncertainty_floor_mm,
+               options_.uncertainty_sigmas * std::hypot(position_sigma_mm, options_.room_frame_position_sigma_mm));
+  bound.rotation_deg =
+      std::max(options_.uncertainty_floor_deg,
+               options_.uncertainty_sigmas * std::hypot(rotation_sigma_deg, options_.room_frame_rotation_sigma_deg));
   return bound;
 }
 

@@ -69,6 +69,17 @@ struct TrackerOptions {
   /// `in`, and the camera's pose implied by the patient seen in it is where
   /// the localiser searches next. 0: such frames are lost.
   double max_camera_carry_s = 0.35;
+  /// The room frame's own uncertainty at the planned isocentre (1 sigma,
+  /// from the plan: RoomMapRecord): the origin marker's pose is shared by
+  /// every frame, so a weak room frame moves every reported pose alike.
+  /// Added in quadrature to each frame's own uncertainty in the correction's
+  /// bound (not in the per-frame test of max_position_sigma_mm). Measured on
+  /// cases with random conditions without it: tracked poses 22-39 mm off,
+  /// beyond their bounds, where the plan had reported its room frame 24 mm
+  /// (1 sigma) at the couch; a patient truly out by that much in the wrong
+  /// direction would have read `in`.
+  double room_frame_position_sigma_mm = 0;
+  double room_frame_rotation_sigma_deg = 0;
 
   std::string Validate() const;
 };

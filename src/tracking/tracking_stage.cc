@@ -135,6 +135,12 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   if (!map) ARPOS_INPUT_ERROR("room map " << map_id->value() << " could not be read");
   in.room_map_id = *map_id;
   in.room_map = FromRecord(*map);
+  const auto usable = [](const std::optional<double>& v) { return v && std::isfinite(*v) && *v >= 0; };
+  if (usable(map->room_frame_couch_sigma_mm) && usable(map->room_frame_tilt_sigma_deg) &&
+      usable(map->room_frame_yaw_sigma_deg)) {
+    in.room_frame_position_sigma_mm = map->room_frame_couch_sigma_mm;
+    in.room_frame_rotation_sigma_deg = std::hypot(*map->room_frame_tilt_sigma_deg, *map->room_frame_yaw_sigma_deg);
+  }
   in.model = FromStoredMesh(plan->reference_model);
   if (in.model.empty()) ARPOS_INPUT_ERROR("plan " << plan->id.value() << ": the reference model has no faces");
   in.room_from_model_target = plan->room_from_model_target;
@@ -160,6 +166,8 @@ TrackerOptions MakeTrackerOptions(const CaseConfig& config, const TrackingInputs
   options.body.detector.intrinsics = config.camera;
   options.body.detector.edge.response = CameraResponse::Srgb();
   options.body.marker_size_m = inputs.sticker_size_m;
+  options.room_frame_position_sigma_mm = inputs.room_frame_position_sigma_mm.value_or(0.0);
+  options.room_frame_rotation_sigma_deg = inputs.room_frame_rotation_sigma_deg.value_or(0.0);
   return options;
 }
 
@@ -173,6 +181,7 @@ std::string TrackSequenceResult::Summary() const {
   if (dropped) out << StringPrintf("; %d of %d camera frames dropped (the tracker too far behind)", dropped, sequence_frames);
   out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
   if (frames) out << "\n  last correction: " << DescribeCorrection(last_correction);
+  if (room_frame_blocks_in) out << "\n  " << room_frame_message;
   return out.str();
 }
 
@@ -253,6 +262,27 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
                        "); a live stream is not sampled ahead";
   }
   result.response_message = response.message;
+  if (!inputs.room_frame_position_sigma_mm) {
+    result.room_frame_message =
+        "room frame: the room map does not say how well its origin marker places it (stored before the plan "
+        "measured this); each correction is bounded by its frame's own uncertainty alone: plan again to include it";
+  } else {
+    const double k = tracker_options.uncertainty_sigmas;
+    const double bound_mm = k * tracker_options.room_frame_position_sigma_mm;
+    const double bound_deg = k * tracker_options.room_frame_rotation_sigma_deg;
+    result.room_frame_message = StringPrintf(
+        "room frame: known to %.2f mm at the planned isocentre and %.3f deg (1 sigma, from the plan); part of "
+        "every correction's bound",
+        tracker_options.room_frame_position_sigma_mm, tracker_options.room_frame_rotation_sigma_deg);
+    result.room_frame_blocks_in = !(bound_mm < options.tolerances.translation_mm && bound_deg < options.tolerances.rotation_deg);
+    if (result.room_frame_blocks_in) {
+      result.room_frame_message += StringPrintf(
+          ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f mm / %.1f deg "
+          "tolerance, so no frame can read `in`; record the room again with a few close, sharp views of the "
+          "origin marker (the plan's warning)",
+          bound_mm, bound_deg, k, options.tolerances.translation_mm, options.tolerances.rotation_deg);
+    }
+  }
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;
@@ -426,14 +456,18 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   run.options = StringPrintf(
       "sequence: %s\nout: %s\noverlay: %s\nparallel: %s\ntemporal_filter: %s\nuncertainty_sigmas: %g\n"
       "body_marker_map: %lld\n"
-      "room_map: %lld\nresponse: %s\n",
+      "room_map: %lld\nresponse: %s\nroom_frame_sigma: %s\n",
       run_source.c_str(),
       write_files ? std::filesystem::absolute(options.out_dir).lexically_normal().string().c_str() : "(none)",
       options.overlay ? "true" : "false",
       options.parallel ? "true" : "false", options.temporal_filter ? "true" : "false",
       tracker_options.uncertainty_sigmas,
       static_cast<long long>(inputs.body_marker_map_id.value()), static_cast<long long>(inputs.room_map_id.value()),
-      response.message.c_str());
+      response.message.c_str(),
+      inputs.room_frame_position_sigma_mm
+          ? StringPrintf("%.3f mm, %.4f deg", tracker_options.room_frame_position_sigma_mm,
+                         tracker_options.room_frame_rotation_sigma_deg).c_str()
+          : "unknown");
   run.summary = result.Summary();
   database->WithTransaction([&] {
     if (options.recording_id) {

@@ -51,6 +51,11 @@ struct TrackingInputs {
   /// The patient's pose at the session's body scan (the alignment): where
   /// tracking looks first.
   Rigid3d room_from_model_at_scan;
+  /// The plan's room frame uncertainty at the planned isocentre (1 sigma;
+  /// rotation: tilt and yaw together); absent for a map stored before the
+  /// plan measured it.
+  std::optional<double> room_frame_position_sigma_mm;
+  std::optional<double> room_frame_rotation_sigma_deg;
   /// Which session and why, for the user.
   std::string session_choice;
 };
@@ -155,6 +160,11 @@ struct TrackSequenceResult {
   int lost_with_stickers = 0;
   double mean_total_ms = 0, p95_total_ms = 0, max_total_ms = 0;
   std::string response_message;  ///< the recording's camera response
+  /// How well the plan's room frame is known and what that does to the
+  /// corrections' bounds; room_frame_blocks_in: so weakly that no frame can
+  /// read `in` (also in Summary()).
+  std::string room_frame_message;
+  bool room_frame_blocks_in = false;
   /// The last frame's correction (what the therapist last saw).
   CouchCorrection last_correction;
   /// room_from_model of every frame with a pose (poses.txt).

@@ -14,7 +14,9 @@
 // NO_COPLANAR=1 (without the coplanar markers),
 // SUPPORT_HW, SUPPORT_MIN_DEG, FIT_FRAME_ERRORS=1 (room frames' errors in the map's
 // best rigid fit to the truth: the cameras' own errors without the room frame's),
-// MIN_LM_OBS, MAX_LM, LM_VOXEL, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides).
+// MIN_LM_OBS, MAX_LM, LM_VOXEL, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides),
+// NO_FILTER=1 (no constant-velocity filter), NO_PRIOR=1 (no motion prior at all),
+// TRUTH_START=1 (every frame relocalised from its true pose).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
 // camera error does to the patient's position).
@@ -230,6 +232,8 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("ACCEL")) options.motion_accel_m_s2 = std::atof(v);
     if (const char* v = std::getenv("ANG_ACCEL")) options.motion_angular_accel_rad_s2 = std::atof(v);
     if (const char* v = std::getenv("WEAK")) options.weak_tracking_fraction = std::atof(v);
+    if (std::getenv("NO_FILTER")) options.motion_filter = false;
+    if (std::getenv("NO_PRIOR")) options.use_motion_prior = false;
     if (depth_quad >= 0) options.depth_sigma_quad_per_m = depth_quad;
     if (depth_const >= 0) options.depth_sigma_const_m = depth_const;
     std::vector<std::pair<std::string, std::filesystem::path>> sequences = {{"room", folder.room_dir},
@@ -254,6 +258,17 @@ int main(int argc, char** argv) {
       LocalizationTimings sum_t;
       for (size_t i = 0; i < seq.size(); ++i) {
         const RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
+        if (std::getenv("TRUTH_START")) {
+          // Diagnostic: every frame relocalised from its true pose (what the
+          // data alone says near the truth: a wrong pose here is the map's or
+          // the matching's, not the search's).
+          for (const auto& g : *seq.CameraGroundTruth()) {
+            if (std::abs(g.timestamp_s - frame.timestamp_s) < 1e-4) {
+              localizer.Reset();
+              localizer.SuggestSearchStart(g.room_from_x);
+            }
+          }
+        }
         const LocalizationResult r = localizer.Localize(frame);
         if (r.ok) est.push_back({frame.timestamp_s, r.room_from_camera});
         const auto frame_truth = std::getenv("FRAME_LOC") ? seq.CameraGroundTruth() : std::nullopt;

@@ -146,12 +146,16 @@ class TrackingStage : public ::testing::Test {
     TrackSequenceResult result;
     std::vector<TrackingFrameRecord> frames;
   };
+  // `room_frame_sigma_mm`, if given, stands for the plan's room frame
+  // uncertainty at the isocentre.
   static Run TrackMadeSequence(const std::string& name, const std::vector<std::string>& kinds,
-                               const CouchTolerances& tolerances = {}) {
+                               const CouchTolerances& tolerances = {},
+                               std::optional<double> room_frame_sigma_mm = std::nullopt) {
     Run run;
     const fs::path seq = MakeSequence(name, kinds, &run.stamps);
     auto database = SqliteDatabase::Open(store_.string());
     run.inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+    if (room_frame_sigma_mm) run.inputs.room_frame_position_sigma_mm = room_frame_sigma_mm;
     const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
     run.options.sequence_dir = seq;
     run.options.out_dir = root_ / ("out_" + name);
@@ -325,6 +329,43 @@ TEST_F(TrackingStage, APatientSeenWhileTheCameraIsNotPlacedIsCarriedForAMoment) 
   }
   EXPECT_GE(carried, 3);
   EXPECT_EQ(frames.back().source, "tracked") << frames.back().note;
+}
+
+// The plan's room frame uncertainty is shared by every frame: it is part of
+// every correction's bound, and a room frame too weak for the tolerance
+// keeps every frame from reading `in`, with the reason in the run's summary.
+TEST_F(TrackingStage, TheRoomFramesUncertaintyIsInEveryCorrectionsBound) {
+  CouchTolerances wide;  // wide enough that a measured frame reads `in`
+  wide.translation_mm = 200;
+  wide.rotation_deg = 20;
+  const std::vector<std::string> kinds(6, "normal");
+  const Run plan = TrackMadeSequence("room_frame_plan", kinds, wide);
+  ASSERT_TRUE(plan.inputs.room_frame_position_sigma_mm.has_value()) << "the plan states its room frame's uncertainty";
+  const double sigma = *plan.inputs.room_frame_position_sigma_mm;
+  EXPECT_GT(sigma, 0.0);
+  EXPECT_FALSE(plan.result.room_frame_blocks_in) << plan.result.room_frame_message;
+  EXPECT_NE(plan.result.room_frame_message.find("room frame: known to"), std::string::npos)
+      << plan.result.room_frame_message;
+  int in = 0;
+  for (const auto& f : plan.frames) {
+    if (!f.room_from_model) continue;
+    ASSERT_TRUE(f.uncertainty_translation_mm.has_value());
+    EXPECT_GE(*f.uncertainty_translation_mm, 3 * sigma - 1e-6) << f.note;
+    in += f.status == TrackingFrameStatus::kInTolerance;
+  }
+  EXPECT_GE(in, 3) << "with the plan's own room frame, measured frames read `in` at 200 mm";
+
+  const Run weak = TrackMadeSequence("room_frame_weak", kinds, wide, 70.0);  // 3 sigma 210 mm > 200 mm
+  EXPECT_TRUE(weak.result.room_frame_blocks_in);
+  EXPECT_NE(weak.result.Summary().find("no frame can read `in`"), std::string::npos) << weak.result.Summary();
+  int measured = 0;
+  for (const auto& f : weak.frames) {
+    if (!f.room_from_model) continue;
+    ++measured;
+    EXPECT_EQ(f.status, TrackingFrameStatus::kOutOfTolerance) << f.note;
+    EXPECT_GE(*f.uncertainty_translation_mm, 210 - 1e-6);
+  }
+  EXPECT_GE(measured, 3);
 }
 
 TEST_F(TrackingStage, TrackCommandRefusesBadArgumentsAndStoresNothing) {
