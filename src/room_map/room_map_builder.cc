@@ -1308,8 +1308,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     // than a small, rarely seen origin's own corners. Fused by inverse
     // variance when the origin's own tilt is weaker than the tolerance;
     // the room frame turns onto the fused plane about the origin's centre.
-    if (report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg &&
-        std::isfinite(report.room_frame_tilt_sigma_deg)) {
+    const bool weak_tilt = report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg;
+    const bool weak_at_couch = options.fuse_tilt_when_weak_at_couch &&
+                               report.room_frame_couch_sigma_mm > options.max_room_frame_couch_sigma_mm;
+    if ((weak_tilt || weak_at_couch) && std::isfinite(report.room_frame_tilt_sigma_deg)) {
       const Rigid3d origin_from_room = ba.room_from_marker[slot].Inverse();
       std::vector<TiltEstimate> estimates;
       TiltEstimate own;

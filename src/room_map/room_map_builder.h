@@ -131,6 +131,10 @@ struct RoomMapBuildOptions {
   /// much unflatness of the floor or wall (m, 1 sigma).
   bool use_coplanar_markers = true;
   double coplanar_flatness_m = 0.002;
+  /// Fuse also when the tilt is within its tolerance but the room frame is
+  /// weaker than max_room_frame_couch_sigma_mm at the couch (the tilt acts
+  /// over the origin's distance to the couch).
+  bool fuse_tilt_when_weak_at_couch = true;
   /// And the plane the origin lies on as depth sees it around it (the floor
   /// or the wall): depth on a grid of at most `support_plane_samples` over
   /// +-`support_plane_half_width_m` about the origin in each view of it,

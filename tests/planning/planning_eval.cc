@@ -16,7 +16,8 @@
 // best rigid fit to the truth: the cameras' own errors without the room frame's),
 // MIN_LM_OBS, MAX_LM, LM_VOXEL, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides),
 // NO_FILTER=1 (no constant-velocity filter), NO_PRIOR=1 (no motion prior at all),
-// TRUTH_START=1 (every frame relocalised from its true pose).
+// TRUTH_START=1 (every frame relocalised from its true pose), TILT_GATE_ONLY=1 (the
+// origin's tilt fused with its coplanar markers only when the tilt itself is weak).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
 // camera error does to the patient's position).
@@ -92,6 +93,7 @@ int main(int argc, char** argv) {
     if (std::getenv("NO_DEPTH_CHECK")) build_options.estimate_depth_correction = false;
     if (std::getenv("SUPPORT")) build_options.use_support_plane = true;
     if (std::getenv("NO_COPLANAR")) build_options.use_coplanar_markers = false;
+    if (std::getenv("TILT_GATE_ONLY")) build_options.fuse_tilt_when_weak_at_couch = false;
     if (const char* v = std::getenv("SUPPORT_HW")) build_options.support_plane_half_width_m = std::atof(v);
     if (const char* v = std::getenv("SUPPORT_MIN_DEG")) build_options.support_plane_min_sigma_deg = std::atof(v);
     if (const char* v = std::getenv("MAX_LM")) build_options.max_landmarks = std::atoi(v);
