@@ -216,7 +216,12 @@ void LiveTracking::Run(LiveRunRequest request) {
         "session %lld (plan %lld, room map %lld, alignment %lld, %zu stickers)",
         static_cast<long long>(inputs.session_id.value()), static_cast<long long>(inputs.plan_id.value()),
         static_cast<long long>(inputs.room_map_id.value()), static_cast<long long>(inputs.alignment_id.value()),
-        inputs.model_from_marker.size())));
+        inputs.model_from_marker.size()) + [&] {
+          // Said before the first frame: otherwise a therapist sees only
+          // `out` and learns why at the end.
+          const RoomFrameNote note = DescribeRoomFrame(inputs, request.tolerances);
+          return note.blocks_in ? "\n" + note.text : std::string();
+        }()));
     std::vector<double> timestamps;
     std::unique_ptr<CameraSource> source;
     if (!request.source_spec.empty()) {

@@ -158,7 +158,9 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
     status_->setText(tr("Stopping: the frames tracked so far are stored as the run…"));
   });
   connect(live_, &LiveTracking::Started, this, [this](QString description) {
-    status_->setStyleSheet("");
+    // A second line is a warning for the whole run (a room frame too weak
+    // for the tolerance): in amber, like an `out` frame.
+    status_->setStyleSheet(description.contains('\n') ? "color: #b06000; font-weight: bold;" : "");
     status_->setText(tr("Tracking against %1.").arg(description));
   });
   connect(live_, &LiveTracking::FrameTracked, this, [this](LiveFrame frame) { OnFrame(frame); });

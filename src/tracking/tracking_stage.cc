@@ -185,6 +185,32 @@ std::string TrackSequenceResult::Summary() const {
   return out.str();
 }
 
+RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchTolerances& tolerances,
+                                double uncertainty_sigmas) {
+  RoomFrameNote note;
+  if (!inputs.room_frame_position_sigma_mm || !inputs.room_frame_rotation_sigma_deg) {
+    note.text =
+        "room frame: the room map does not say how well its origin marker places it (stored before the plan "
+        "measured this); each correction is bounded by its frame's own uncertainty alone: plan again to include it";
+    return note;
+  }
+  const double k = uncertainty_sigmas;
+  const double sigma_mm = *inputs.room_frame_position_sigma_mm, sigma_deg = *inputs.room_frame_rotation_sigma_deg;
+  note.text = StringPrintf(
+      "room frame: known to %.2f mm at the planned isocentre and %.3f deg (1 sigma, from the plan); part of "
+      "every correction's bound",
+      sigma_mm, sigma_deg);
+  note.blocks_in = !(k * sigma_mm < tolerances.translation_mm && k * sigma_deg < tolerances.rotation_deg);
+  if (note.blocks_in) {
+    note.text += StringPrintf(
+        ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f mm / %.1f deg "
+        "tolerance, so no frame can read `in`; record the room again with a few close, sharp views of the "
+        "origin marker (the plan's warning)",
+        k * sigma_mm, k * sigma_deg, k, tolerances.translation_mm, tolerances.rotation_deg);
+  }
+  return note;
+}
+
 OverlayPoses OverlayPosesOf(const TrackedFrame& tracked, const Rigid3d& room_from_model_target) {
   OverlayPoses poses;
   if (tracked.room_from_camera) {
@@ -262,27 +288,10 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
                        "); a live stream is not sampled ahead";
   }
   result.response_message = response.message;
-  if (!inputs.room_frame_position_sigma_mm) {
-    result.room_frame_message =
-        "room frame: the room map does not say how well its origin marker places it (stored before the plan "
-        "measured this); each correction is bounded by its frame's own uncertainty alone: plan again to include it";
-  } else {
-    const double k = tracker_options.uncertainty_sigmas;
-    const double bound_mm = k * tracker_options.room_frame_position_sigma_mm;
-    const double bound_deg = k * tracker_options.room_frame_rotation_sigma_deg;
-    result.room_frame_message = StringPrintf(
-        "room frame: known to %.2f mm at the planned isocentre and %.3f deg (1 sigma, from the plan); part of "
-        "every correction's bound",
-        tracker_options.room_frame_position_sigma_mm, tracker_options.room_frame_rotation_sigma_deg);
-    result.room_frame_blocks_in = !(bound_mm < options.tolerances.translation_mm && bound_deg < options.tolerances.rotation_deg);
-    if (result.room_frame_blocks_in) {
-      result.room_frame_message += StringPrintf(
-          ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f mm / %.1f deg "
-          "tolerance, so no frame can read `in`; record the room again with a few close, sharp views of the "
-          "origin marker (the plan's warning)",
-          bound_mm, bound_deg, k, options.tolerances.translation_mm, options.tolerances.rotation_deg);
-    }
-  }
+  const RoomFrameNote room_frame = DescribeRoomFrame(inputs, options.tolerances, tracker_options.uncertainty_sigmas);
+  result.room_frame_message = room_frame.text;
+  result.room_frame_blocks_in = room_frame.blocks_in;
+
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;

@@ -70,6 +70,16 @@ struct TrackingInputs {
 TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
                                   const std::string& patient_external_id, bool newest_if_several = false);
 
+/// What the plan's room frame uncertainty does to the corrections' bounds
+/// (`uncertainty_sigmas` of it, TrackerOptions): a line for the user, and
+/// whether it alone keeps every frame from reading `in` at `tolerances`.
+struct RoomFrameNote {
+  std::string text;
+  bool blocks_in = false;
+};
+RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchTolerances& tolerances,
+                                double uncertainty_sigmas = TrackerOptions().uncertainty_sigmas);
+
 /// Where the overlay draws the model for a tracked frame: the current pose
 /// (camera_from_model, from the room poses when the camera is localised, else
 /// the body tracker's own) and the planned one (only with a camera pose).
