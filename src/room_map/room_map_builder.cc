@@ -1306,8 +1306,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     // too: the markers' centres spread over metres, the depth over a metre
     // square in every view of the origin, fix the plane's tilt far better
     // than a small, rarely seen origin's own corners. Fused by inverse
-    // variance when the origin's own tilt is weaker than the tolerance;
-    // the room frame turns onto the fused plane about the origin's centre.
+    // variance when the origin's own tilt is weaker than its tolerance, or
+    // the room frame weaker than its tolerance at the couch (options); the
+    // room frame turns onto the fused plane about the origin's centre.
     const bool weak_tilt = report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg;
     const bool weak_at_couch = options.fuse_tilt_when_weak_at_couch &&
                                report.room_frame_couch_sigma_mm > options.max_room_frame_couch_sigma_mm;

