@@ -123,6 +123,36 @@ TEST(RoomMapOrigin, RarelySeenSmallObliqueOriginStillGivesARoomFrame) {
   }
 }
 
+// The origin's tilt is fused with the markers coplanar with it when the room
+// frame is weak at the couch, even with the tilt itself within its tolerance
+// (the tilt acts over the distance to the couch), and not otherwise. Here
+// the tolerances are set so that only the couch rule can ask for it.
+TEST(RoomMapOrigin, ARoomFrameWeakAtTheCouchTakesTheTiltOfTheMarkersCoplanarWithTheOrigin) {
+  const PoorOriginCase& c = GetPoorOriginCase();
+  RoomMapBuildOptions options = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
+  options.max_room_frame_tilt_sigma_deg = 90;     // the tilt never weak by itself
+  options.max_room_frame_couch_sigma_mm = 1e-3;   // the room frame always weak at the couch
+  const RoomMapBuildResult fused = BuildRoomMap(Sequence::Open(c.folder.room_dir), c.folder.config, options);
+  std::printf("%s", fused.report.ToText().c_str());
+  ASSERT_GE(fused.report.coplanar_markers, 2) << "this case has markers on the origin's plane";
+  options.fuse_tilt_when_weak_at_couch = false;
+  const RoomMapBuildResult alone = BuildRoomMap(Sequence::Open(c.folder.room_dir), c.folder.config, options);
+  EXPECT_EQ(alone.report.coplanar_markers, 0);
+  // Fusing independent information narrows the tilt, and the couch with it.
+  EXPECT_LT(fused.report.room_frame_tilt_sigma_deg, alone.report.room_frame_tilt_sigma_deg);
+  EXPECT_LT(fused.report.room_frame_couch_sigma_mm, alone.report.room_frame_couch_sigma_mm);
+  // And the markers near the couch stay within what the plan says.
+  const Eigen::Vector3d couch = options.couch_point_in_room;
+  for (const RoomMapMarkerEntry& m : fused.map.markers) {
+    if (m.num_observations < 3) continue;
+    for (const auto& t : c.truth.room_markers) {
+      if (t.id != m.id || (t.parent_from_marker.translation - couch).norm() > 1.5) continue;
+      const double e = (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000;
+      EXPECT_LT(e, 3 * fused.report.room_frame_couch_sigma_mm + 2) << "marker " << m.id;
+    }
+  }
+}
+
 // The couch-top exclusion box is in the room frame; a map started from a
 // marker other than the poorly seen origin holds its landmarks in that
 // marker's frame until the end. No landmark of the finished map lies in the
