@@ -241,7 +241,7 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
                               result.sequence_frames, result.frames, result.dropped);
   }
   std::cerr << result.response_message << "\n";
-  if (!result.room_frame_blocks_in) std::cerr << result.room_frame_message << "\n";
+  if (!result.room_frame.blocks_in) std::cerr << result.room_frame.text << "\n";
   std::cout << result.Summary() << "\n"
             << StringPrintf("stored as tracking run %lld; wrote %s\n", static_cast<long long>(result.run_id.value()),
                             out_dir.string().c_str());

@@ -601,7 +601,6 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   if (keypoints_job.valid()) {
     keypoints_job.get();  // rethrows what the extraction threw
     tm.keypoints_ms += keypoints_cpu_ms;
-    mark = ThreadCpuMs();  // the wait is not this thread's work
   }
 
   PoseRefinementResult refined;

@@ -12,7 +12,8 @@
 /// uncertainty at the isocentre (the camera's position and rotation errors,
 /// the latter acting over the camera-to-isocentre distance, and the body's),
 /// and the correction (feedback/couch_correction.h) with that uncertainty
-/// (`uncertainty_sigmas` of it) added before the tolerance test. With the
+/// and the plan's room frame's (`uncertainty_sigmas` of them together)
+/// added before the tolerance test. With the
 /// temporal filter (pose_filter.h) the reported pose and correction are the
 /// filtered ones, and a frame reads `in` only when both the filtered and the
 /// frame's own estimate, each with its bound, are within tolerance.

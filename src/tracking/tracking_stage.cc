@@ -181,7 +181,7 @@ std::string TrackSequenceResult::Summary() const {
   if (dropped) out << StringPrintf("; %d of %d camera frames dropped (the tracker too far behind)", dropped, sequence_frames);
   out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
   if (frames) out << "\n  last correction: " << DescribeCorrection(last_correction);
-  if (room_frame_blocks_in) out << "\n  " << room_frame_message;
+  if (room_frame.blocks_in) out << "\n  " << room_frame.text;
   return out.str();
 }
 
@@ -288,9 +288,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
                        "); a live stream is not sampled ahead";
   }
   result.response_message = response.message;
-  const RoomFrameNote room_frame = DescribeRoomFrame(inputs, options.tolerances, tracker_options.uncertainty_sigmas);
-  result.room_frame_message = room_frame.text;
-  result.room_frame_blocks_in = room_frame.blocks_in;
+  result.room_frame = DescribeRoomFrame(inputs, options.tolerances, tracker_options.uncertainty_sigmas);
 
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;

@@ -171,10 +171,8 @@ struct TrackSequenceResult {
   double mean_total_ms = 0, p95_total_ms = 0, max_total_ms = 0;
   std::string response_message;  ///< the recording's camera response
   /// How well the plan's room frame is known and what that does to the
-  /// corrections' bounds; room_frame_blocks_in: so weakly that no frame can
-  /// read `in` (also in Summary()).
-  std::string room_frame_message;
-  bool room_frame_blocks_in = false;
+  /// corrections' bounds (in Summary() when it keeps every frame from `in`).
+  RoomFrameNote room_frame;
   /// The last frame's correction (what the therapist last saw).
   CouchCorrection last_correction;
   /// room_from_model of every frame with a pose (poses.txt).

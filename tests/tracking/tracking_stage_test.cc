@@ -343,9 +343,9 @@ TEST_F(TrackingStage, TheRoomFramesUncertaintyIsInEveryCorrectionsBound) {
   ASSERT_TRUE(plan.inputs.room_frame_position_sigma_mm.has_value()) << "the plan states its room frame's uncertainty";
   const double sigma = *plan.inputs.room_frame_position_sigma_mm;
   EXPECT_GT(sigma, 0.0);
-  EXPECT_FALSE(plan.result.room_frame_blocks_in) << plan.result.room_frame_message;
-  EXPECT_NE(plan.result.room_frame_message.find("room frame: known to"), std::string::npos)
-      << plan.result.room_frame_message;
+  EXPECT_FALSE(plan.result.room_frame.blocks_in) << plan.result.room_frame.text;
+  EXPECT_NE(plan.result.room_frame.text.find("room frame: known to"), std::string::npos)
+      << plan.result.room_frame.text;
   int in = 0;
   for (const auto& f : plan.frames) {
     if (!f.room_from_model) continue;
@@ -356,7 +356,7 @@ TEST_F(TrackingStage, TheRoomFramesUncertaintyIsInEveryCorrectionsBound) {
   EXPECT_GE(in, 3) << "with the plan's own room frame, measured frames read `in` at 200 mm";
 
   const Run weak = TrackMadeSequence("room_frame_weak", kinds, wide, 70.0);  // 3 sigma 210 mm > 200 mm
-  EXPECT_TRUE(weak.result.room_frame_blocks_in);
+  EXPECT_TRUE(weak.result.room_frame.blocks_in);
   EXPECT_NE(weak.result.Summary().find("no frame can read `in`"), std::string::npos) << weak.result.Summary();
   int measured = 0;
   for (const auto& f : weak.frames) {
