@@ -47,6 +47,8 @@ class Controller {
  protected:
   /// Reports progress, then throws Cancelled if a cancel was requested.
   void Step(const std::string& step, double fraction);
+  /// For a stage function that reports its own steps.
+  const ControllerCallbacks& callbacks() const { return callbacks_; }
 
  private:
   ControllerCallbacks callbacks_;

@@ -187,6 +187,41 @@ TEST(SessionStage, SampleSessionGivesStickersReconstructionAndModelPose) {
   }
 }
 
+// The stage's algorithm needs no store: the room map built from the case,
+// the case's model and target pose in, a model pose and stickers out; a
+// cancel request stops it between steps.
+TEST(SessionStage, TheStageRunsWithoutAStoreAndStopsWhenCancelled) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  const CaseFolder folder = LoadCaseFolder(case_dir);
+  SessionPlanInputs plan;
+  plan.room_map = BuildCaseRoomMap(folder, RoomMapStageOptions()).map;
+  plan.model = LoadTriangleMesh(folder.reference_model);
+  plan.room_from_model_target = folder.room_from_model_target;
+  SessionStageOptions options;
+  options.case_dir = case_dir;
+  std::vector<std::string> steps;
+  ControllerCallbacks callbacks;
+  callbacks.progress = [&steps](const std::string& step, double) { steps.push_back(step); };
+  const SessionStageResult r = BuildSession(folder, plan, options, callbacks);
+  EXPECT_GE(r.marker_map.markers.size(), 5u);
+  EXPECT_FALSE(r.mesh.empty());
+  EXPECT_EQ(r.model_from_markers.size(), r.marker_map.markers.size());
+  const auto truth = ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt");
+  const PoseError e = ComputePoseError(truth.front().room_from_x, r.room_from_model);
+  EXPECT_LT(e.translation_mm, 5.0);
+  EXPECT_LT(e.rotation_deg, 0.5);
+  EXPECT_EQ(r.session_id, SessionId());  // nothing stored
+  ASSERT_FALSE(steps.empty());
+  EXPECT_EQ(steps.back(), "aligning the reference model");
+
+  // Cancelled after the reconstruction: no result.
+  callbacks.cancel_requested = [&steps] { return !steps.empty() && steps.back() == "meshing (Poisson)"; };
+  steps.clear();
+  EXPECT_THROW(BuildSession(folder, plan, options, callbacks), Cancelled);
+  EXPECT_EQ(steps.back(), "meshing (Poisson)");
+}
+
 // A simulated scan long enough for several frames to see the room: the
 // room offset is taken again from the room-localised frames registered to
 // the reconstruction (step 5), and the model pose and the stickers on the
