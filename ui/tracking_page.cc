@@ -160,7 +160,8 @@ TrackingPage::TrackingPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   connect(live_, &LiveTracking::Started, this, [this](QString description) {
     // A second line is a warning for the whole run (a room frame too weak
     // for the tolerance): in amber, like an `out` frame.
-    status_->setStyleSheet(description.contains('\n') ? "color: #b06000; font-weight: bold;" : "");
+    run_warned_ = description.contains('\n');
+    status_->setStyleSheet(run_warned_ ? "color: #b06000; font-weight: bold;" : "");
     status_->setText(tr("Tracking against %1.").arg(description));
   });
   connect(live_, &LiveTracking::FrameTracked, this, [this](LiveFrame frame) { OnFrame(frame); });
@@ -446,6 +447,7 @@ void TrackingPage::StartRun(bool paused) {
   panel_->Clear(tr("Starting…"));
   frame_label_->clear();
   status_->setStyleSheet("");
+  run_warned_ = false;
   status_->setText(tr("Loading the session and the recording…"));
   live_->Start(request);
   UpdateButtons();
@@ -476,7 +478,9 @@ void TrackingPage::OnFinished(bool ok, const QString& message, qint64 run_id, in
                          .arg(frames)
                          .arg(images_shown_)
                          .arg(message));
-    status_->setStyleSheet("color: #2a7a2a;");
+    // Stored, but a run that could not read `in` (its room frame too weak
+    // for the tolerance) stays amber: the summary says why.
+    status_->setStyleSheet(run_warned_ ? "color: #b06000; font-weight: bold;" : "color: #2a7a2a;");
   } else {
     status_->setText(tr("Tracking failed: %1").arg(message));
     status_->setStyleSheet("color: #c02828; font-weight: bold;");

@@ -91,6 +91,7 @@ class TrackingPage : public QWizardPage {
   QLabel* frame_label_;
   QLabel* status_;
   int images_shown_ = 0;  ///< overlay images shown in this run
+  bool run_warned_ = false;  ///< the run started with a warning for all of it (amber to the end)
   bool filters_installed_ = false;
   bool launched_ = false;
   static const char kLiveTag[];

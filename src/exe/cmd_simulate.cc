@@ -1,5 +1,8 @@
 #include "exe/cmd_simulate.h"
 
+#include <algorithm>
+#include <array>
+#include <cstdlib>
 #include <iostream>
 
 #include "exe/args.h"
@@ -42,6 +45,9 @@ const char kUsage[] =
     "  --depth-field-mm A          smooth depth error field over the image, A mm at 1 m\n"
     "                              (growing with depth squared)\n"
     "  --flying-pixels             depths between the two surfaces at depth edges\n"
+    "  --distortion K1,K2,P1,P2,K3  lens distortion of the colour camera (OpenCV model; the\n"
+    "                              depth is registered to it), e.g. a Kinect's\n"
+    "                              0.26,-0.95,-0.005,0.003,1.16; written to case.yaml\n"
     "  --breathing-mm A            the anterior torso moves A mm peak to peak (period 3-5 s);\n"
     "                              the reference model and body ground truth are end-exhale\n"
     "  --random-conditions         draw the scene from the seed: origin marker placement\n"
@@ -90,7 +96,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     const Args args(argv,
                     {"profile", "seed", "frames", "tracking-sequences", "room-walk", "body-mesh",
                      "png-compression", "supersampling", "response", "depth-scale-error",
-                     "depth-field-mm", "breathing-mm"},
+                     "depth-field-mm", "breathing-mm", "distortion"},
                     {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
     if (args.positional().size() != 1) {
       std::cerr << "simulate: expected one OUT_DIR\n" << kUsage;
@@ -115,6 +121,19 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     if (args.Has("depth-field-mm")) options.depth_field_mm = args.GetDouble("depth-field-mm", 0);
     if (args.Has("flying-pixels")) options.flying_pixels = true;
     if (args.Has("breathing-mm")) options.breathing_mm = args.GetDouble("breathing-mm", 0);
+    if (auto d = args.Get("distortion")) {
+      std::string spaced = *d;
+      std::replace(spaced.begin(), spaced.end(), ',', ' ');
+      const std::vector<std::string> parts = SplitWhitespace(spaced);
+      std::array<double, 5> k{};
+      if (parts.size() != 5) ARPOS_INPUT_ERROR("--distortion: expected k1,k2,p1,p2,k3 (5 numbers), got '" << *d << "'");
+      for (int i = 0; i < 5; ++i) {
+        char* end = nullptr;
+        k[i] = std::strtod(parts[i].c_str(), &end);
+        if (end == parts[i].c_str() || *end != '\0') ARPOS_INPUT_ERROR("--distortion: '" << parts[i] << "' is not a number");
+      }
+      options.distortion = k;
+    }
     options.random_conditions = args.Has("random-conditions");
 
     const sim::Simulator simulator(options);

@@ -5,7 +5,9 @@
 #include <cmath>
 #include <cstdlib>
 #include <future>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "geometry/mesh_io.h"
 #include "geometry/so3.h"
@@ -108,6 +110,11 @@ std::string SimulationOptions::Check() const {
     return "depth-field-mm: must be 0..50";
   }
   if (breathing_mm && !(*breathing_mm >= 0 && *breathing_mm <= 30)) return "breathing-mm: must be 0..30";
+  if (distortion) {
+    for (double d : *distortion) {
+      if (!std::isfinite(d) || std::abs(d) > 10) return "distortion: coefficients must be finite and within +-10";
+    }
+  }
   return "";
 }
 
@@ -116,11 +123,68 @@ std::filesystem::path DefaultBodyMeshPath() {
   return ARPOS_DEFAULT_BODY_MESH;
 }
 
+void Simulator::SetUpDistortion(const std::array<double, 5>& coefficients) {
+  CameraIntrinsics& K = profile_.intrinsics;
+  for (int i = 0; i < 5; ++i) K.distortion[i] = coefficients[i];
+  if (!K.HasDistortion()) return;
+  const int W = K.width, H = K.height;
+  // Every pixel's ideal (undistorted) position, checked by distorting it back.
+  std::vector<cv::Point2f> px;
+  px.reserve(static_cast<size_t>(W) * H);
+  for (int v = 0; v < H; ++v)
+    for (int u = 0; u < W; ++u) px.emplace_back(static_cast<float>(u), static_cast<float>(v));
+  std::vector<cv::Point2f> ideal;
+  cv::undistortPoints(px, ideal, K.CvK(), K.CvDistortion(), cv::noArray(), cv::noArray(),
+                      cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 50, 1e-12));
+  std::vector<cv::Point3f> rays;
+  rays.reserve(ideal.size());
+  for (const auto& p : ideal) rays.emplace_back(p.x, p.y, 1.0f);
+  std::vector<cv::Point2f> back;
+  cv::projectPoints(rays, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K.CvK(), K.CvDistortion(), back);
+  double worst = 0;
+  float lo_x = 1e9f, hi_x = -1e9f, lo_y = 1e9f, hi_y = -1e9f;
+  for (size_t i = 0; i < px.size(); ++i) {
+    worst = std::max(worst, static_cast<double>(cv::norm(back[i] - px[i])));
+    const float x = static_cast<float>(K.fx * ideal[i].x + K.cx), y = static_cast<float>(K.fy * ideal[i].y + K.cy);
+    lo_x = std::min(lo_x, x), hi_x = std::max(hi_x, x), lo_y = std::min(lo_y, y), hi_y = std::max(hi_y, y);
+    ideal[i] = {x, y};
+  }
+  if (!(worst < 0.01)) {
+    ARPOS_INPUT_ERROR("simulate: distortion: not invertible over the " << W << "x" << H
+                      << " image (a pixel maps back " << worst << " px away)");
+  }
+  // The ideal camera that covers every distorted pixel, 2 px to spare.
+  const int left = std::max(0, static_cast<int>(std::ceil(-lo_x)) + 2);
+  const int top = std::max(0, static_cast<int>(std::ceil(-lo_y)) + 2);
+  const int right = std::max(0, static_cast<int>(std::ceil(hi_x - (W - 1))) + 2);
+  const int bottom = std::max(0, static_cast<int>(std::ceil(hi_y - (H - 1))) + 2);
+  if (left + right > W || top + bottom > H) {
+    ARPOS_INPUT_ERROR("simulate: distortion: too strong (the undistorted image would be more than twice as wide)");
+  }
+  render_intrinsics_ = K;
+  render_intrinsics_.distortion = {0, 0, 0, 0, 0};
+  render_intrinsics_.width = W + left + right;
+  render_intrinsics_.height = H + top + bottom;
+  render_intrinsics_.cx = K.cx + left;
+  render_intrinsics_.cy = K.cy + top;
+  distort_map_x_.create(H, W, CV_32F);
+  distort_map_y_.create(H, W, CV_32F);
+  for (int v = 0; v < H; ++v) {
+    for (int u = 0; u < W; ++u) {
+      const cv::Point2f& p = ideal[static_cast<size_t>(v) * W + u];
+      distort_map_x_.at<float>(v, u) = p.x + left;
+      distort_map_y_.at<float>(v, u) = p.y + top;
+    }
+  }
+}
+
 Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   const std::string problem = options_.Check();
   if (!problem.empty()) ARPOS_INPUT_ERROR("simulate: " << problem);
   profile_ = MakeSensorProfile(options_.profile);
   if (options_.supersampling > 0) profile_.supersampling = options_.supersampling;
+  render_intrinsics_ = profile_.intrinsics;
+  if (options_.distortion) SetUpDistortion(*options_.distortion);
   WorldOptions wo;
   wo.seed = options_.seed;
   wo.body_mesh_path =
@@ -644,7 +708,7 @@ SimulatedFrame Simulator::RenderScene(const Scene& scene, bool noise, uint64_t f
   SimulatedFrame out;
   out.room_from_camera = scene.room_from_camera;
   out.room_from_model = scene.room_from_model;
-  out.exact = Render(world_.scene, instances, profile_.intrinsics, camera_from_room,
+  out.exact = Render(world_.scene, instances, render_intrinsics_, camera_from_room,
                      *scene.lighting, ro);
   cv::Mat radiance = out.exact.color;
   if (noise && options_.hard && scene_at != nullptr) {
@@ -661,8 +725,25 @@ SimulatedFrame Simulator::RenderScene(const Scene& scene, bool noise, uint64_t f
       }
       return cam2_from_room * room2_from_room1 * scene.room_from_camera;
     };
-    radiance = ApplyMotionBlur(radiance, out.exact, profile_.intrinsics, profile_.exposure_time_s,
+    radiance = ApplyMotionBlur(radiance, out.exact, render_intrinsics_, profile_.exposure_time_s,
                                motion, kLabelHand, kBlurTaps);
+  }
+  if (!distort_map_x_.empty()) {
+    // Through the lens: colour resampled smoothly, depth, normals and labels
+    // taken from the nearest ideal pixel (no depths mixed across edges).
+    const auto through_lens = [this](const cv::Mat& in, int interpolation) {
+      cv::Mat o;
+      cv::remap(in, o, distort_map_x_, distort_map_y_, interpolation, cv::BORDER_CONSTANT, cv::Scalar::all(0));
+      return o;
+    };
+    const bool blurred = radiance.data != out.exact.color.data;
+    out.exact.color = through_lens(out.exact.color, cv::INTER_LINEAR);
+    radiance = blurred ? through_lens(radiance, cv::INTER_LINEAR) : out.exact.color;
+    out.exact.depth = through_lens(out.exact.depth, cv::INTER_NEAREST);
+    out.exact.normal = through_lens(out.exact.normal, cv::INTER_NEAREST);
+    cv::Mat label;  // remap takes no 32-bit integers; labels are small
+    out.exact.label.convertTo(label, CV_32F);
+    through_lens(label, cv::INTER_NEAREST).convertTo(out.exact.label, CV_32S);
   }
   ColorEncoding encoding;
   encoding.response = response_;

@@ -32,6 +32,7 @@
 /// so body_groundtruth.txt (the rigid pose of the non-moving part) is
 /// unchanged; stickers ride on the skin (translated by A w(centre) ...).
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -81,6 +82,10 @@ struct SimulationOptions {
   std::optional<double> depth_field_mm;     ///< smooth depth error field, amplitude at 1 m
   std::optional<bool> flying_pixels;        ///< mixed depths at depth edges
   std::optional<double> breathing_mm;       ///< anterior torso, peak to peak
+  /// Lens distortion of the colour camera (OpenCV k1 k2 p1 p2 k3; the depth
+  /// is registered to it): the frames are rendered through it and case.yaml
+  /// lists it. Must be invertible over the image.
+  std::optional<std::array<double, 5>> distortion;
   /// Draw the scene conditions from the seed (conditions.h): origin marker
   /// placement and visibility, room markers, room, camera paths and pace
   /// (room_walk is then drawn too), and the sensor and patient conditions
@@ -209,6 +214,7 @@ class Simulator {
   OriginVisibility MeasureOriginVisibility(const SequencePlan& room) const;
   bool OriginSeen(const Rigid3d& world_from_camera, double* side_px, double* angle_deg) const;
   SimulatedFrame ToRoomFrame(SimulatedFrame frame) const;
+  void SetUpDistortion(const std::array<double, 5>& coefficients);
 
   SimulationOptions options_;
   SensorProfile profile_;
@@ -228,6 +234,11 @@ class Simulator {
   double breathing_m_ = 0, breathing_period_s_ = 0, breathing_phase_rad_ = 0;
   std::vector<double> sticker_breathing_weight_;  ///< parallel to world_.body_markers
   OriginVisibility origin_visibility_;
+  // Lens distortion: frames are rendered by an ideal camera wide enough for
+  // the distorted image (render_intrinsics_), then resampled: distorted
+  // pixel (u, v) shows ideal pixel (distort_map_x_, distort_map_y_)(v, u).
+  CameraIntrinsics render_intrinsics_;
+  cv::Mat distort_map_x_, distort_map_y_;
 };
 
 }  // namespace arpos::sim
