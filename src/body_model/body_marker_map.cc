@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "features/edge_refinement.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -21,7 +22,7 @@ struct CornerResidual {
       : r_cr(camera_from_room.RotationMatrix()),
         t_cr(camera_from_room.translation),
         fx(k.fx), fy(k.fy), cx(k.cx), cy(k.cy),
-        corner(corner_in_marker), observed(observed_px), inv_sigma(1.0 / sigma_px) {}
+        corner(corner_in_marker), observed(PixelUndistorter(k).Undistort(observed_px)), inv_sigma(1.0 / sigma_px) {}
 
   template <typename T>
   bool operator()(const T* q_rm, const T* t_rm, T* residual) const {
@@ -39,7 +40,7 @@ struct CornerResidual {
   Eigen::Vector3d t_cr;
   double fx, fy, cx, cy;
   Eigen::Vector3d corner;
-  Eigen::Vector2d observed;
+  Eigen::Vector2d observed;  ///< ideal (undistorted) pixel: the residual is a pinhole one
   double inv_sigma;
 };
 
@@ -72,11 +73,12 @@ double CornerRmsPx(const Rigid3d& room_from_marker, const Rigid3d& room_from_cam
                    const BodyMarkerView& seen, const CameraIntrinsics& k,
                    const std::array<Eigen::Vector3d, 4>& corners) {
   const Rigid3d camera_from_marker = room_from_camera.Inverse() * room_from_marker;
+  const PixelUndistorter undistorter(k);
   double sum = 0;
   for (int c = 0; c < 4; ++c) {
     const Eigen::Vector3d p = camera_from_marker * corners[c];
     if (p.z() <= 1e-6) return 1e9;
-    sum += (k.Project(p) - seen.corners_px[c]).squaredNorm();
+    sum += (k.Project(p) - undistorter.Undistort(seen.corners_px[c])).squaredNorm();
   }
   return std::sqrt(sum / 4);
 }
