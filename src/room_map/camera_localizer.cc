@@ -13,6 +13,7 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "features/edge_refinement.h"
 #include "geometry/so3.h"
 #include "room_map/bundle_adjustment.h"
 #include "util/check.h"
@@ -104,6 +105,7 @@ struct CameraLocalizer::Impl {
   CameraIntrinsics K;
   const CameraLocalizerOptions& options;
   bool distortion = false;
+  PixelUndistorter lens;  ///< ideal <-> image pixels (identity without distortion)
   std::unique_ptr<MarkerDetector> detector;
   KeypointExtractor extractor;
   KeypointGrid grid;
@@ -136,6 +138,7 @@ struct CameraLocalizer::Impl {
   Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
       : map(m), K(k), options(o), extractor(o.keypoints) {
     distortion = K.HasDistortion();
+    lens = PixelUndistorter(K);
     MarkerDetectorOptions d = options.detector;
     d.intrinsics = distortion ? std::optional<CameraIntrinsics>(K) : std::nullopt;
     detector = std::make_unique<MarkerDetector>(d);
@@ -250,7 +253,14 @@ struct CameraLocalizer::Impl {
     for (int l = 0; l < map.num_landmarks(); ++l) {
       const Eigen::Vector3d p = R * map.landmarks_in_room[l] + t;
       if (p.z() < 0.1) continue;
-      const double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
+      double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
+      if (distortion) {
+        // The keypoint grid holds image pixels (the lens's); the landmark's
+        // ideal pixel is taken through it.
+        const Eigen::Vector2d image = lens.Distort(Eigen::Vector2d(u, v));
+        u = image.x();
+        v = image.y();
+      }
       if (u < border || v < border || u >= K.width - border || v >= K.height - border) continue;
       const std::uint8_t* d = map.landmark_descriptors.ptr<std::uint8_t>(l);
       const double max_dz = std::max(0.05, 5 * DepthSigma(p.z()));
