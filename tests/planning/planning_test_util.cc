@@ -55,7 +55,7 @@ void WriteFrames(const sim::Simulator& simulator, int q, const std::vector<int>&
 
 // Writes the small case (see GetSmallCase) into `root`.
 void WriteSmallCase(const std::string& profile, int room_frames, int tracking_frames, bool tracking_from_room,
-                    const std::filesystem::path& root) {
+                    bool lens, const std::filesystem::path& root) {
   // The simulator plans 30 fps sequences (room 300 frames over 20 s,
   // tracking 300 over 10 s); the case gets `room_frames` spread over the
   // whole room walk and `tracking_frames` consecutive frames, so tracking
@@ -68,6 +68,7 @@ void WriteSmallCase(const std::string& profile, int room_frames, int tracking_fr
   o.body_scan_frames = 1;
   o.tracking_frames = 300;
   o.tracking_sequences = 1;
+  if (lens) o.distortion = kKinectLens;
   const sim::Simulator simulator(o);
   CreateDirectories(root);
   CaseConfig config;
@@ -105,12 +106,12 @@ void WriteSmallCase(const std::string& profile, int room_frames, int tracking_fr
 }  // namespace
 
 const SmallCase& GetSmallCase(const std::string& profile, int room_frames, int tracking_frames,
-                              bool tracking_from_room) {
+                              bool tracking_from_room, bool lens) {
   static std::mutex mutex;
   static std::map<std::string, std::unique_ptr<SmallCase>> cases;
   std::lock_guard<std::mutex> lock(mutex);
   const std::string name = "sim" + std::to_string(sim::kSimulatorVersion) + "_case_" + profile + "_" + std::to_string(room_frames) + "_" +
-                           std::to_string(tracking_frames) + (tracking_from_room ? "_r" : "_t");
+                           std::to_string(tracking_frames) + (tracking_from_room ? "_r" : "_t") + (lens ? "_lens" : "");
   auto& slot = cases[name];
   if (!slot) {
     // Cases are cached on disk (ctest runs every test in its own process):
@@ -127,7 +128,7 @@ const SmallCase& GetSmallCase(const std::string& profile, int room_frames, int t
       CreateDirectories(cache);
       const std::filesystem::path staging = cache / (name + ".tmp" + std::to_string(static_cast<long long>(::getpid())));
       std::filesystem::remove_all(staging);
-      WriteSmallCase(profile, room_frames, tracking_frames, tracking_from_room, staging);
+      WriteSmallCase(profile, room_frames, tracking_frames, tracking_from_room, lens, staging);
       WriteFileAtomic(staging / "complete", "ok\n");
       std::error_code ec;
       std::filesystem::rename(staging, c->root, ec);
@@ -141,12 +142,12 @@ const SmallCase& GetSmallCase(const std::string& profile, int room_frames, int t
 }
 
 const RoomMapBuildResult& GetSmallCaseMap(const std::string& profile, int room_frames, int tracking_frames,
-                                          bool tracking_from_room) {
+                                          bool tracking_from_room, bool lens) {
   static std::mutex mutex;
   static std::map<std::string, std::unique_ptr<RoomMapBuildResult>> maps;
-  const SmallCase& c = GetSmallCase(profile, room_frames, tracking_frames, tracking_from_room);
+  const SmallCase& c = GetSmallCase(profile, room_frames, tracking_frames, tracking_from_room, lens);
   std::lock_guard<std::mutex> lock(mutex);
-  auto& slot = maps[Key(profile, room_frames, tracking_frames) + (tracking_from_room ? "/r" : "/t")];
+  auto& slot = maps[Key(profile, room_frames, tracking_frames) + (tracking_from_room ? "/r" : "/t") + (lens ? "/lens" : "")];
   if (!slot) {
     const Sequence room = Sequence::Open(c.folder.room_dir);
     slot = std::make_unique<RoomMapBuildResult>(
