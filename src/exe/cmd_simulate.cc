@@ -48,6 +48,8 @@ const char kUsage[] =
     "  --distortion K1,K2,P1,P2,K3  lens distortion of the colour camera (OpenCV model; the\n"
     "                              depth is registered to it), e.g. a Kinect's\n"
     "                              0.26,-0.95,-0.005,0.003,1.16; written to case.yaml\n"
+    "  --dictionary NAME           ArUco dictionary of every marker (default DICT_4X4_250;\n"
+    "                              any OpenCV predefined one with 200 markers or more)\n"
     "  --breathing-mm A            the anterior torso moves A mm peak to peak (period 3-5 s);\n"
     "                              the reference model and body ground truth are end-exhale\n"
     "  --random-conditions         draw the scene from the seed: origin marker placement\n"
@@ -96,7 +98,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     const Args args(argv,
                     {"profile", "seed", "frames", "tracking-sequences", "room-walk", "body-mesh",
                      "png-compression", "supersampling", "response", "depth-scale-error",
-                     "depth-field-mm", "breathing-mm", "distortion"},
+                     "depth-field-mm", "breathing-mm", "distortion", "dictionary"},
                     {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
     if (args.positional().size() != 1) {
       std::cerr << "simulate: expected one OUT_DIR\n" << kUsage;
@@ -134,6 +136,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
       }
       options.distortion = k;
     }
+    options.dictionary = args.GetOr("dictionary", "DICT_4X4_250");
     options.random_conditions = args.Has("random-conditions");
 
     const sim::Simulator simulator(options);

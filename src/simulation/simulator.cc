@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <future>
+#include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -110,6 +111,11 @@ std::string SimulationOptions::Check() const {
     return "depth-field-mm: must be 0..50";
   }
   if (breathing_mm && !(*breathing_mm >= 0 && *breathing_mm <= 30)) return "breathing-mm: must be 0..30";
+  if (const int id = ArucoDictionaryId(dictionary); id < 0) {
+    return "dictionary: unknown ArUco dictionary '" + dictionary + "'";
+  } else if (cv::aruco::getPredefinedDictionary(id)->bytesList.rows < 200) {
+    return "dictionary: " + dictionary + " has fewer than 200 markers (stickers use ids 100-199)";
+  }
   if (distortion) {
     for (double d : *distortion) {
       if (!std::isfinite(d) || std::abs(d) > 10) return "distortion: coefficients must be finite and within +-10";
@@ -187,6 +193,7 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   if (options_.distortion) SetUpDistortion(*options_.distortion);
   WorldOptions wo;
   wo.seed = options_.seed;
+  wo.dictionary = ArucoDictionaryId(options_.dictionary);
   wo.body_mesh_path =
       options_.body_mesh_path.empty() ? DefaultBodyMeshPath() : options_.body_mesh_path;
   random_conditions_ = options_.random_conditions;
@@ -928,7 +935,7 @@ SimulationReport Simulator::WriteCase(const std::filesystem::path& out_dir,
 
   CaseConfig config;
   config.camera = profile_.intrinsics;
-  config.dictionary = "DICT_4X4_250";
+  config.dictionary = options_.dictionary;
   config.room_markers = {0.15, 0, 49};
   config.room_origin_id = 0;
   config.body_markers = {0.03, 100, 199};

@@ -86,6 +86,9 @@ struct SimulationOptions {
   /// is registered to it): the frames are rendered through it and case.yaml
   /// lists it. Must be invertible over the image.
   std::optional<std::array<double, 5>> distortion;
+  /// ArUco dictionary of every marker (case.yaml markers.dictionary); one of
+  /// OpenCV's predefined with at least 200 markers (stickers are 100-199).
+  std::string dictionary = "DICT_4X4_250";
   /// Draw the scene conditions from the seed (conditions.h): origin marker
   /// placement and visibility, room markers, room, camera paths and pace
   /// (room_walk is then drawn too), and the sensor and patient conditions

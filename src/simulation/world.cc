@@ -404,7 +404,7 @@ World BuildWorld(const WorldOptions& options) {
   world.origin_moved = !options.world_from_origin_marker.IsApprox(Rigid3d::Identity(), 0, 0);
   world.room_from_world = options.world_from_origin_marker.Inverse();
   if (!world.origin_moved) world.room_from_world = Rigid3d::Identity();
-  const int dictionary = cv::aruco::DICT_4X4_250;
+  const int dictionary = options.dictionary;
 
   // --- Patient ---------------------------------------------------------------
   Eigen::Vector3d iso_in_mh;

@@ -90,6 +90,9 @@ struct WorldOptions {
   std::vector<bool> room_marker_places;
   double room_marker_size_m = 0.15;
   double body_marker_size_m = 0.03;
+  /// OpenCV predefined ArUco dictionary (cv::aruco::PREDEFINED_DICTIONARY_NAME)
+  /// of every marker: room ids 0-49, stickers 100-199.
+  int dictionary = 2;  // DICT_4X4_250
   int min_stickers = 10, max_stickers = 16;  ///< inclusive, within 8..20
   double reference_noise_m = 0.0003;         ///< sigma along normals
   /// Quads whose two triangulations differ by more keep their diagonal.
