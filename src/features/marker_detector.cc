@@ -129,6 +129,11 @@ std::vector<MarkerObservation> MarkerDetector::Detect(const cv::Mat& gray_or_bgr
 }
 
 void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>* observations) {
+  Detect(image, observations, cv::Rect());
+}
+
+void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>* observations,
+                            const cv::Rect& window) {
   ARPOS_CHECK(observations != nullptr, "Detect needs an output vector");
   observations->clear();
   Impl& m = *impl_;
@@ -149,12 +154,16 @@ void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>
           false, "DetectMarkers needs an 8-bit grey, BGR or BGRA image, got type " << image.type());
   }
   if (gray->empty()) return;
+  const cv::Rect search = window.area() > 0 ? window & cv::Rect(0, 0, gray->cols, gray->rows)
+                                            : cv::Rect(0, 0, gray->cols, gray->rows);
+  if (search.area() <= 0) return;
+  const cv::Mat searched = (*gray)(search);
 
   m.params->minMarkerPerimeterRate =
-      options_.min_marker_perimeter_px / std::max(gray->cols, gray->rows);
+      options_.min_marker_perimeter_px / std::max(searched.cols, searched.rows);
   m.corners.clear();
   m.ids.clear();
-  cv::aruco::detectMarkers(*gray, m.dictionary, m.corners, m.ids, m.params);
+  cv::aruco::detectMarkers(searched, m.dictionary, m.corners, m.ids, m.params);
 
   for (size_t i = 0; i < m.ids.size(); ++i) {
     const int id = m.ids[i];
@@ -166,7 +175,7 @@ void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>
     MarkerObservation obs;
     obs.id = id;
     for (int k = 0; k < 4; ++k) {
-      obs.detected_corners_px[k] = Eigen::Vector2d(m.corners[i][k].x, m.corners[i][k].y);
+      obs.detected_corners_px[k] = Eigen::Vector2d(m.corners[i][k].x + search.x, m.corners[i][k].y + search.y);
     }
     obs.corners_px = obs.detected_corners_px;
     obs.status = MarkerStatus::kNotRefined;

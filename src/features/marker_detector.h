@@ -100,6 +100,11 @@ class MarkerDetector {
   std::vector<MarkerObservation> Detect(const cv::Mat& gray_or_bgr);
   /// Same, into `observations` (cleared first) to reuse its capacity.
   void Detect(const cv::Mat& gray_or_bgr, std::vector<MarkerObservation>* observations);
+  /// Markers found inside `window` of the whole image `gray_or_bgr` (a
+  /// search near a predicted place); their corners are refined and reported
+  /// in the whole image's pixels, so a camera's distortion applies as it
+  /// does to Detect. An empty window searches the whole image.
+  void Detect(const cv::Mat& gray_or_bgr, std::vector<MarkerObservation>* observations, const cv::Rect& window);
 
   const MarkerDetectorOptions& options() const { return options_; }
   /// Data bits per marker side of the dictionary (4 for DICT_4X4_*).

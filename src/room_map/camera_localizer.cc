@@ -195,7 +195,7 @@ struct CameraLocalizer::Impl {
       for (int c = 0; c < 4 && ok; ++c) {
         const Eigen::Vector3d p = camera_from_room * m.corners_in_room[c];
         if (p.z() < 0.1) ok = false;
-        px[c] = K.Project(p);
+        px[c] = lens.Distort(K.Project(p));  // where the lens puts it
       }
       if (!ok) continue;
       const Eigen::Vector3d centre = camera_from_room * m.room_from_marker.translation;
@@ -220,14 +220,10 @@ struct CameraLocalizer::Impl {
       bool found = false;
       for (const auto& already : markers) found |= already.id == m.id;
       if (found) continue;
-      detector->Detect(gray(cv::Rect(x0, y0, x1 - x0, y1 - y0)), &scratch);
-      for (auto o : scratch) {
-        for (int c = 0; c < 4; ++c) {
-          o.corners_px[c] += Eigen::Vector2d(x0, y0);
-          o.detected_corners_px[c] += Eigen::Vector2d(x0, y0);
-        }
-        AcceptMarker(o);
-      }
+      // Found in the window, refined in the whole image (its pixels are the
+      // lens's: the edge fits undo the distortion there).
+      detector->Detect(gray, &scratch, cv::Rect(x0, y0, x1 - x0, y1 - y0));
+      for (const auto& o : scratch) AcceptMarker(o);
     }
   }
 
@@ -590,7 +586,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     if (given) {
       for (const auto& o : *detections) m.AcceptMarker(o);
       full_detection_done = true;
-    } else if (predicted && options_.marker_windows && !m.distortion) {
+    } else if (predicted && options_.marker_windows) {
       m.DetectInWindows(*predicted);
       if (m.markers.empty() && m.last_markers_used > 0) {
         // The last frame had a marker and no window holds one now (it may

@@ -54,7 +54,7 @@ struct CameraLocalizerOptions {
   bool use_markers = true;
   bool use_keypoints = true;
   /// Search markers only around their predicted corners while tracking
-  /// (cameras without lens distortion; otherwise the whole image).
+  /// (where the lens puts them; refined in the whole image).
   bool marker_windows = true;
   /// Window margin around the predicted marker: max(px, fraction * side).
   double window_margin_px = 16;

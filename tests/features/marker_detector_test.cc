@@ -157,5 +157,45 @@ TEST(MarkerDetector, IdRangesColourInputAndOptions) {
   EXPECT_TRUE(DetectMarkers(cv::Mat(), MarkerDetectorOptions()).empty());
 }
 
+// A search in a window near a predicted place (the localiser's, while
+// tracking) reports the same corners as the whole image's, in the whole
+// image's pixels, through a lens with distortion too: the corners are
+// refined in the whole image, where the lens's model applies.
+TEST(MarkerDetector, AWindowsMarkersAreTheWholeImagesThroughALens) {
+  CameraIntrinsics cam = VgaCamera();
+  cam.distortion = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633};
+  std::mt19937 rng(7);
+  const std::vector<MarkerPlacement> placements = RandomPlacements(cam, 5, 30, 60, 45, 0.15, 3, &rng);
+  std::vector<MarkerTruth> truth;
+  const cv::Mat image = RenderMarkers(cam, placements, RenderOptions(), &rng, &truth);
+  MarkerDetectorOptions options;
+  options.intrinsics = cam;
+  MarkerDetector detector(options);
+  std::vector<MarkerObservation> whole;
+  detector.Detect(image, &whole);
+  ASSERT_GE(whole.size(), 3u);
+  std::vector<MarkerObservation> in_window;
+  for (const MarkerObservation& o : whole) {
+    ASSERT_EQ(o.status, MarkerStatus::kRefined) << "marker " << o.id;
+    for (const MarkerTruth& t : truth) {
+      if (t.id != o.id) continue;
+      for (int c = 0; c < 4; ++c) EXPECT_LT((o.corners_px[c] - t.corners_px[c]).norm(), 0.15) << "marker " << o.id;
+    }
+    Eigen::AlignedBox2d box;
+    for (const auto& p : o.corners_px) box.extend(p);
+    const cv::Rect window(static_cast<int>(box.min().x()) - 12, static_cast<int>(box.min().y()) - 12,
+                          static_cast<int>(box.sizes().x()) + 25, static_cast<int>(box.sizes().y()) + 25);
+    detector.Detect(image, &in_window, window);
+    ASSERT_EQ(in_window.size(), 1u) << "marker " << o.id;
+    EXPECT_EQ(in_window[0].id, o.id);
+    for (int c = 0; c < 4; ++c) EXPECT_LT((in_window[0].corners_px[c] - o.corners_px[c]).norm(), 1e-6);
+  }
+  // A window with no marker in it finds none; an empty one is the whole image.
+  detector.Detect(image, &in_window, cv::Rect(-50, -50, 20, 20));
+  EXPECT_TRUE(in_window.empty());
+  detector.Detect(image, &in_window, cv::Rect());
+  EXPECT_EQ(in_window.size(), whole.size());
+}
+
 }  // namespace
 }  // namespace arpos::testing
