@@ -50,6 +50,7 @@ const char kUsage[] =
     "                              0.26,-0.95,-0.005,0.003,1.16; written to case.yaml\n"
     "  --dictionary NAME           ArUco dictionary of every marker (default DICT_4X4_250;\n"
     "                              any OpenCV predefined one with 200 markers or more)\n"
+    "  --sticker-size-m S          printed side of the body stickers (default 0.03)\n"
     "  --breathing-mm A            the anterior torso moves A mm peak to peak (period 3-5 s);\n"
     "                              the reference model and body ground truth are end-exhale\n"
     "  --random-conditions         draw the scene from the seed: origin marker placement\n"
@@ -98,7 +99,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     const Args args(argv,
                     {"profile", "seed", "frames", "tracking-sequences", "room-walk", "body-mesh",
                      "png-compression", "supersampling", "response", "depth-scale-error",
-                     "depth-field-mm", "breathing-mm", "distortion", "dictionary"},
+                     "depth-field-mm", "breathing-mm", "distortion", "dictionary", "sticker-size-m"},
                     {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
     if (args.positional().size() != 1) {
       std::cerr << "simulate: expected one OUT_DIR\n" << kUsage;
@@ -137,6 +138,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
       options.distortion = k;
     }
     options.dictionary = args.GetOr("dictionary", "DICT_4X4_250");
+    options.sticker_size_m = args.GetDouble("sticker-size-m", 0.03);
     options.random_conditions = args.Has("random-conditions");
 
     const sim::Simulator simulator(options);

@@ -613,6 +613,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   progress("initialising the marker map", 0.5);
   bool origin_seen = false;
   std::vector<MarkerView> views;
+  // Views whose depth disagrees with both of the corners' poses: depth over
+  // the marker's distance from its printed size (a wrong depth_scale shows
+  // as one ratio in every view).
+  std::vector<double> depth_ratios;
   for (size_t s = 0; s < frames.size(); ++s) {
     const FrameData& f = frames[s];
     for (int id : f.all_ids_seen) origin_seen |= id == origin_id;
@@ -620,6 +624,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     report.marker_views += static_cast<int>(f.markers.size());
     for (size_t m = 0; m < f.markers.size(); ++m) {
       const MarkerPose& p = f.poses[m];
+      if (p.status == MarkerPoseStatus::kDepthMismatch && p.depth_plane.valid && p.num_solutions > 0 &&
+          p.solutions[0].camera_from_marker.translation.z() > 0) {
+        depth_ratios.push_back(p.depth_plane.point_in_camera.z() / p.solutions[0].camera_from_marker.translation.z());
+      }
       if (p.status != MarkerPoseStatus::kOk || p.reprojection_rms_px > options.max_marker_view_rms_px) {
         ++report.ambiguous_marker_views;
         continue;
@@ -651,6 +659,19 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     for (const MarkerView& v : views) {
       ++usable_views[v.marker_id];
       frames_of[v.marker_id].insert(v.frame);
+    }
+    if (usable_views.empty() && depth_ratios.size() >= 3 &&
+        2 * depth_ratios.size() >= static_cast<size_t>(report.marker_views)) {
+      std::nth_element(depth_ratios.begin(), depth_ratios.begin() + depth_ratios.size() / 2, depth_ratios.end());
+      const double ratio = depth_ratios[depth_ratios.size() / 2];
+      ARPOS_INPUT_ERROR(sequence.folder().string()
+                        << ": the depth disagrees with the room markers in every view: it reads "
+                        << StringPrintf("%.3f", ratio) << " times the distance their printed size ("
+                        << marker_size << " m, case.yaml markers.room.size_m) gives (median of "
+                        << depth_ratios.size() << " views). Check camera.depth_scale in case.yaml ("
+                        << K.depth_scale << " depth units per metre; TUM recordings use 5000, OpenNI and "
+                           "RealSense millimetres 1000; these images look like "
+                        << StringPrintf("%.0f", K.depth_scale * ratio) << ") and the markers' printed size");
     }
     if (usable_views.empty()) {
       ARPOS_INPUT_ERROR(sequence.folder().string()

@@ -116,6 +116,7 @@ std::string SimulationOptions::Check() const {
   } else if (cv::aruco::getPredefinedDictionary(id)->bytesList.rows < 200) {
     return "dictionary: " + dictionary + " has fewer than 200 markers (stickers use ids 100-199)";
   }
+  if (!(sticker_size_m >= 0.015 && sticker_size_m <= 0.06)) return "sticker-size-m: must be 0.015..0.06";
   if (distortion) {
     for (double d : *distortion) {
       if (!std::isfinite(d) || std::abs(d) > 10) return "distortion: coefficients must be finite and within +-10";
@@ -194,6 +195,7 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   WorldOptions wo;
   wo.seed = options_.seed;
   wo.dictionary = ArucoDictionaryId(options_.dictionary);
+  wo.body_marker_size_m = options_.sticker_size_m;
   wo.body_mesh_path =
       options_.body_mesh_path.empty() ? DefaultBodyMeshPath() : options_.body_mesh_path;
   random_conditions_ = options_.random_conditions;

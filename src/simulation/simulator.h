@@ -89,6 +89,8 @@ struct SimulationOptions {
   /// ArUco dictionary of every marker (case.yaml markers.dictionary); one of
   /// OpenCV's predefined with at least 200 markers (stickers are 100-199).
   std::string dictionary = "DICT_4X4_250";
+  /// Printed side of the body stickers (m; default 0.03).
+  double sticker_size_m = 0.03;
   /// Draw the scene conditions from the seed (conditions.h): origin marker
   /// placement and visibility, room markers, room, camera paths and pace
   /// (room_walk is then drawn too), and the sensor and patient conditions

@@ -239,6 +239,26 @@ TEST_F(CliInputChecks, PlanThatCannotMapTheRoomStoresNothing) {
   }
 }
 
+// A depth_scale of 5000 (TUM's) for depth in millimetres: every marker's
+// depth disagrees with its printed size. Was "no room marker is seen sharply
+// enough for a pose", which sent the user to the colour images.
+TEST_F(CliInputChecks, AWrongDepthScaleIsNamedWithTheScaleTheImagesShow) {
+  std::string yaml = ReadTextFile(case_dir() / "case.yaml");
+  const size_t at = yaml.find("depth_scale: 1000");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  yaml.replace(at, 17, "depth_scale: 5000");
+  WriteFileAtomic(case_dir() / "case.yaml", yaml);
+  const CliResult r = RunArpos("plan " + Case() + " --store " + store());
+  ExpectAnInputError(r);
+  EXPECT_TRUE(Contains(r.output, "the depth disagrees with the room markers in every view: it reads 0.2")) << r.output;
+  EXPECT_TRUE(Contains(r.output, "Check camera.depth_scale in case.yaml (5000 depth units per metre")) << r.output;
+  EXPECT_TRUE(Contains(r.output, "these images look like 99") || Contains(r.output, "these images look like 100"))
+      << r.output;
+  for (const char* table : {"patients", "plans", "room_maps", "audit_log"}) {
+    EXPECT_EQ(StoredRows(store(), table), 0) << table << " after `arpos plan`:\n" << r.output;
+  }
+}
+
 // `evaluate` with nothing matched used to print MTE 0.000 with 100 % lost.
 TEST(CliEvaluate, NothingMatchedIsNotAPerfectScore) {
   TempDir dir;
