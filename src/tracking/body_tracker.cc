@@ -77,6 +77,10 @@ double MsSince(Clock::time_point t0) {
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 // The last pose predicts the next frame for at most this long (s).
 constexpr double kPredictionMaxAgeS = 0.5;
+// A 4x4 ArUco sticker with its border is 6 cells across: below about 2 px a
+// cell it cannot be read (measured: 2 cm stickers at 1.1-1.3 m on a 640x480
+// camera, 9 px across, were read in 16-24 % of the frames).
+constexpr double kReadableStickerSidePx = 12;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 
@@ -141,9 +145,14 @@ struct BodyTracker::Impl {
 
   // Each mapped sticker the pose puts in view, searched in a window around
   // its predicted corners.
+  // The largest side (px) of the stickers the last search predicted in view
+  // (0: none predicted).
+  double predicted_side_px = 0;
+
   void SearchAround(const Rigid3d& camera_from_model, const BodyTrackerOptions& o,
                     std::vector<MarkerObservation>* found) {
     found->clear();
+    predicted_side_px = 0;
     // The largest predicted stickers first: ArUco reads those best, and the
     // others are refined where the fitted pose puts them (RefineAtPose).
     std::vector<std::pair<double, int>> by_size;
@@ -171,6 +180,7 @@ struct BodyTracker::Impl {
       }
       for (int c = 0; c < 4; ++c) perimeter += (px[(c + 1) % 4] - px[c]).norm();
       const double side = perimeter / 4;
+      predicted_side_px = std::max(predicted_side_px, side);
       if (side < o.min_sticker_side_px) continue;
       if (box.min().x() < 2 || box.min().y() < 2 || box.max().x() > K.width - 3 || box.max().y() > K.height - 3) continue;
       const double margin = std::max(o.sticker_window_margin_px, 0.75 * side);
@@ -537,9 +547,17 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   const auto t_pose = Clock::now();
   ARPOS_DEBUG("body frame " << frame.index << ": " << (predicted ? (from_hint ? "hint" : "predicted") : "no prediction")
                             << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
+  // Stickers expected in view but too small for ArUco to read (about 2 px a
+  // cell): said, with what to change.
+  const std::string too_small =
+      stickers.empty() && predicted && m.predicted_side_px > 0 && m.predicted_side_px < kReadableStickerSidePx
+          ? StringPrintf("; the stickers are about %.0f px across from here, too small to read (%.0f px or more "
+                         "are needed): use larger stickers or bring the camera closer",
+                         m.predicted_side_px, kReadableStickerSidePx)
+          : std::string();
   if (!start_pose) {
     if (windows_empty) result.retry = 2;
-    result.message = stickers.empty() ? "no sticker in view" : "no sticker pose";
+    result.message = (stickers.empty() ? "no sticker in view" : "no sticker pose") + too_small;
     result.timings.pose_ms = MsSince(t_pose);
     return finish(result);
   }
@@ -770,9 +788,10 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   } else if (carried) {
     accept = surface_ok && !from_hint && m.frames_without_stickers < o.max_frames_without_stickers;
     if (!accept) {
-      result.message = !surface_ok ? StringPrintf("no sticker in view; the surface alone does not hold (%d depth "
-                                                  "inliers, %.0f %%)", depth_inliers, 100 * inlier_fraction)
-                                   : StringPrintf("no sticker in view for %d frames", m.frames_without_stickers + 1);
+      result.message = (!surface_ok ? StringPrintf("no sticker in view; the surface alone does not hold (%d depth "
+                                                   "inliers, %.0f %%)", depth_inliers, 100 * inlier_fraction)
+                                    : StringPrintf("no sticker in view for %d frames", m.frames_without_stickers + 1)) +
+                       too_small;
     }
   } else {
     result.message = "every sticker disagreed with the others and the surface";
