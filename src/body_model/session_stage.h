@@ -29,7 +29,7 @@
 /// `room_from_model` at scan time. What tracking needs is
 /// `model_from_marker` = `reconstruction_from_model`^-1 * `body_from_marker`
 /// per sticker (SessionStageResult::model_from_markers).
-/// BuildSession runs steps 1-4 and stores nothing; StoreSession writes every
+/// BuildSession runs these steps and stores nothing; StoreSession writes every
 /// artefact with its audit entries in one transaction.
 
 #include <cstdint>
@@ -83,11 +83,11 @@ struct SessionStageOptions {
   bool average_anchor = true;
   /// Rebuild the sticker map from the frames that see stickers, each
   /// registered to the finished reconstruction (GICP), so the stickers sit
-  /// where the body surface is (see the controller, step 4). Off: the map
+  /// where the body surface is (BuildSession, step 4). Off: the map
   /// from the sticker-consistent cameras.
   bool stickers_on_surface = true;
   /// Then the room offset again from every room-localised frame registered
-  /// to the reconstruction (see the controller, step 5).
+  /// to the reconstruction (BuildSession, step 5).
   bool room_offset_from_surface = true;
   /// Fewer mapped body stickers than this: the stage stops with an error
   /// (tracking follows the patient by them; one or two give a weak pose).
@@ -196,7 +196,7 @@ struct SessionPlanInputs {
   RoomMap room_map;
 };
 
-/// Steps 1-4 on `folder`'s body scan with the plan's room map, model and
+/// The stage on `folder`'s body scan with the plan's room map, model and
 /// target pose; stores and writes nothing. Fills the result but for the
 /// store's ids, the plan choice and the approval (the caller's), and the
 /// store and total times. Throws InputError (the camera never localised in
