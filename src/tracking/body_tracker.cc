@@ -443,6 +443,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   const auto t_detect = Clock::now();
   cv::cvtColor(frame.color, m.gray, cv::COLOR_BGR2GRAY);
   std::vector<MarkerObservation> found;
+  m.predicted_side_px = 0;  // this frame's search says
   if (predicted && search == Search::kWindows) m.SearchAround(*predicted, o, &found);
   const bool whole_image = search == Search::kWholeImage ||
                            (search == Search::kWindows && found.empty() && (!predicted || from_hint));
