@@ -148,6 +148,7 @@ std::string SessionStageOptions::Check() const {
   if (reconstruction_frame_step < 1) return "reconstruction_frame_step must be at least 1";
   if (poisson_depth < 4 || poisson_depth > 11) return "poisson_depth must be in 4..11";
   if (min_stickers < 1) return "min_stickers must be at least 1";
+  if (!(min_sticker_reading_distance_m >= 0)) return "min_sticker_reading_distance_m must not be negative";
   if (threads < 1) return "threads must be at least 1";
   return "";
 }
@@ -190,6 +191,9 @@ std::string SessionStageResult::Summary() const {
                         surface_offset_frames, 1000 * surface_offset_shift_m.norm());
   }
   out << RoomPlacementText() << "\n";
+  if (sticker_reading_distance_m > 0) {
+    out << StringPrintf("stickers readable up to %.2f m from this camera (face-on)\n", sticker_reading_distance_m);
+  }
   for (const std::string& w : warnings) out << "warning: " << w << "\n";
   return out.str();
 }
@@ -594,6 +598,16 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
                            "the room markers beside the couch in view for longer",
                            result.room_placement_frames, result.room_placement_sigma_mm,
                            options.max_room_placement_sigma_mm));
+  }
+  // How far tracking can read the stickers with this camera.
+  const double readable_px = ReadableMarkerSidePx(detector.marker_bits());
+  result.sticker_reading_distance_m = camera.fx * sticker_size / readable_px;
+  if (result.sticker_reading_distance_m < options.min_sticker_reading_distance_m) {
+    result.warnings.push_back(StringPrintf(
+        "the stickers (%.3f m) are read only within %.2f m of this camera (%.0f px across, face-on); tracking "
+        "from farther loses the patient: use stickers of at least %.3f m",
+        sticker_size, result.sticker_reading_distance_m, readable_px,
+        options.min_sticker_reading_distance_m * readable_px / camera.fx));
   }
   t0 = Clock::now();
   for (const ScanFrame& f : frames) {

@@ -95,6 +95,9 @@ struct SessionStageOptions {
   /// The scan's placement in the room weaker than this (1 sigma at the
   /// stickers, mm) is reported as a warning with what to record.
   double max_room_placement_sigma_mm = 1.0;
+  /// Stickers this camera reads only closer than this (m, face-on) are
+  /// reported as a warning: tracking from farther loses the patient.
+  double min_sticker_reading_distance_m = 1.2;
   int poisson_depth = 8;
   int threads = 2;
 
@@ -156,7 +159,11 @@ struct SessionStageResult {
   /// their number; infinity below 3 frames).
   int room_placement_frames = 0;
   double room_placement_sigma_mm = std::numeric_limits<double>::infinity();
-  /// What the user should know (a weakly placed scan), with what to record.
+  /// How far this camera reads the stickers face-on (m): where they are
+  /// ReadableMarkerSidePx across.
+  double sticker_reading_distance_m = 0;
+  /// What the user should know (a weakly placed scan, stickers too small for
+  /// the tracking distance), with what to do.
   std::vector<std::string> warnings;
   std::string RoomPlacementText() const;
   int reconstruction_points = 0;

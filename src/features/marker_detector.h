@@ -116,6 +116,12 @@ class MarkerDetector {
   std::unique_ptr<Impl> impl_;
 };
 
+/// The side (px) below which ArUco cannot read a marker of `marker_bits`
+/// data bits a side: about 2 px a cell, the black border included (12 px for
+/// 4x4 markers). Measured: 2 cm stickers 9-10 px across (4x4, 640x480 camera
+/// at 1.1-1.3 m) were read in 16-24 % of the frames.
+inline double ReadableMarkerSidePx(int marker_bits) { return 2.0 * (marker_bits + 2); }
+
 /// One-shot convenience: MarkerDetector(options).Detect(gray_or_bgr).
 std::vector<MarkerObservation> DetectMarkers(const cv::Mat& gray_or_bgr,
                                              const MarkerDetectorOptions& options = {});

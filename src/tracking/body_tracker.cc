@@ -77,10 +77,6 @@ double MsSince(Clock::time_point t0) {
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 // The last pose predicts the next frame for at most this long (s).
 constexpr double kPredictionMaxAgeS = 0.5;
-// A 4x4 ArUco sticker with its border is 6 cells across: below about 2 px a
-// cell it cannot be read (measured: 2 cm stickers at 1.1-1.3 m on a 640x480
-// camera, 9 px across, were read in 16-24 % of the frames).
-constexpr double kReadableStickerSidePx = 12;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 
@@ -550,11 +546,12 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
                             << ", " << found.size() << " detections, " << stickers.size() << " mapped stickers");
   // Stickers expected in view but too small for ArUco to read (about 2 px a
   // cell): said, with what to change.
+  const double readable_px = ReadableMarkerSidePx(m.detector->marker_bits());
   const std::string too_small =
-      stickers.empty() && predicted && m.predicted_side_px > 0 && m.predicted_side_px < kReadableStickerSidePx
+      stickers.empty() && predicted && m.predicted_side_px > 0 && m.predicted_side_px < readable_px
           ? StringPrintf("; the stickers are about %.0f px across from here, too small to read (%.0f px or more "
                          "are needed): use larger stickers or bring the camera closer",
-                         m.predicted_side_px, kReadableStickerSidePx)
+                         m.predicted_side_px, readable_px)
           : std::string();
   if (!start_pose) {
     if (windows_empty) result.retry = 2;

@@ -214,6 +214,17 @@ TEST(SessionStage, TheStageRunsWithoutAStoreAndStopsWhenCancelled) {
   EXPECT_EQ(r.session_id, SessionId());  // nothing stored
   ASSERT_FALSE(steps.empty());
   EXPECT_EQ(steps.back(), "aligning the reference model");
+  // 3 cm stickers: readable (12 px across) up to fx * 0.03 / 12 from this camera.
+  EXPECT_NEAR(r.sticker_reading_distance_m, folder.config.camera.fx * folder.config.body_markers.size_m / 12, 1e-9);
+  for (const std::string& w : r.warnings) EXPECT_EQ(w.find("stickers ("), std::string::npos) << w;
+  EXPECT_NE(r.Summary().find("stickers readable up to"), std::string::npos) << r.Summary();
+  // Tracking from 5 m would need larger stickers: said, with the size.
+  SessionStageOptions far = options;
+  far.min_sticker_reading_distance_m = 5.0;
+  const SessionStageResult f = BuildSession(folder, plan, far);
+  bool said = false;
+  for (const std::string& w : f.warnings) said |= w.find("use stickers of at least") != std::string::npos;
+  EXPECT_TRUE(said) << f.Summary();
 
   // Cancelled after the reconstruction: no result.
   callbacks.cancel_requested = [&steps] { return !steps.empty() && steps.back() == "meshing (Poisson)"; };
