@@ -72,6 +72,7 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (!(weak_tracking_fraction >= 0 && weak_tracking_fraction <= 1))
     out << "weak_tracking_fraction must be in [0, 1]";
   else if (relocalisation_max_landmarks < 1) out << "relocalisation_max_landmarks must be at least 1";
+  else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
@@ -390,7 +391,7 @@ struct CameraLocalizer::Impl {
     if (!options.use_keypoints || keypoints.size() < 6 || map.landmarks_in_room.empty()) return std::nullopt;
     const int n_matches = MatchGlobally();
     Lap(mark, matching_ms);
-    if (n_matches < options.min_keypoints) return std::nullopt;
+    if (n_matches < options.relocalisation_min_inliers) return std::nullopt;
     std::vector<cv::Point3d> object;
     std::vector<cv::Point2d> image;
     for (size_t i = 0; i < match_of_keypoint.size(); ++i) {
@@ -406,7 +407,7 @@ struct CameraLocalizer::Impl {
                                        options.ransac_iterations, static_cast<float>(options.ransac_threshold_px),
                                        0.999, inliers, cv::SOLVEPNP_AP3P);
     Lap(mark, pnp_ms);
-    if (!ok || static_cast<int>(inliers.size()) < options.min_keypoints) return std::nullopt;
+    if (!ok || static_cast<int>(inliers.size()) < options.relocalisation_min_inliers) return std::nullopt;
     const Eigen::Vector3d rv(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
     const Eigen::Vector3d tv(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
     return Rigid3d::FromRotationVector(rv, tv);

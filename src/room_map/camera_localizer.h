@@ -122,6 +122,10 @@ struct CameraLocalizerOptions {
   double relocalisation_ratio = 0.8;
   int ransac_iterations = 200;
   double ransac_threshold_px = 4.0;
+  /// A relocalisation hypothesis from those matches needs this many PnP
+  /// inliers; it is then refined by matching by projection over the whole
+  /// map and accepted only as any pose is (min_keypoints, sigma, reach).
+  int relocalisation_min_inliers = 10;
 
   /// Prior on the pose from the constant-velocity motion model (only while
   /// tracking): sigmas for frames 1/30 s apart, growing in proportion to the
