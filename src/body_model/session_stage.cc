@@ -144,6 +144,9 @@ std::string SessionStageResult::RoomPlacementText() const {
 std::string SessionStageOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
   if (!(max_room_placement_sigma_mm > 0)) return "max_room_placement_sigma_mm must be positive";
+  if (!(min_still_surface_share > 0 && min_still_surface_share <= 1)) {
+    return "min_still_surface_share must be in (0, 1]";
+  }
   if (marker_frame_step < 1) return "marker_frame_step must be at least 1";
   if (reconstruction_frame_step < 1) return "reconstruction_frame_step must be at least 1";
   if (poisson_depth < 4 || poisson_depth > 11) return "poisson_depth must be in 4..11";
@@ -191,6 +194,17 @@ std::string SessionStageResult::Summary() const {
                         surface_offset_frames, 1000 * surface_offset_shift_m.norm());
   }
   out << RoomPlacementText() << "\n";
+  if (surface_motion.frames > 0) {
+    out << surface_motion.Describe();
+    if (aligned_on_still_surface) {
+      out << StringPrintf("; the model aligned to the still surface (%d of %d points)", still_surface_points,
+                          reconstruction_points);
+    } else if (surface_motion.moving_patches > 0) {
+      out << StringPrintf("; too little still surface to align on (%d of %d points): aligned to all of it",
+                          still_surface_points, reconstruction_points);
+    }
+    out << "\n";
+  }
   if (sticker_reading_distance_m > 0) {
     out << StringPrintf("stickers readable up to %.2f m from this camera (face-on)\n", sticker_reading_distance_m);
   }
@@ -497,11 +511,16 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   t0 = Clock::now();
   std::vector<StampedPose> camera_poses;
   Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
-  for (const ScanFrame& f : frames) {
+  std::vector<size_t> recon_frame_of;  // the frame of each recon_reports entry
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const ScanFrame& f = frames[i];
     if (!f.posed) continue;
     camera_poses.push_back({f.timestamp_s, f.view.room_from_camera});
     camera_centre_sum += f.view.room_from_camera.translation;
-    if (f.cloud) recon_reports.push_back(builder.AddFrame(*f.cloud, f.view.room_from_camera));
+    if (f.cloud) {
+      recon_reports.push_back(builder.AddFrame(*f.cloud, f.view.room_from_camera));
+      recon_frame_of.push_back(i);
+    }
   }
   t_recon += SecondsSince(t0);
 
@@ -518,6 +537,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   // mean estimates the first frame's error (the others average out): its
   // shift at the reconstruction's centre is taken off the whole cloud.
   Rigid3d anchor = Rigid3d::Identity();
+  Rigid3d room_offset = Rigid3d::Identity();  // step 5's correction, when applied
   if (options.average_anchor) {
     Eigen::Vector3d centre = Eigen::Vector3d::Zero();
     for (size_t i = 0; i < fused.size(); ++i) centre += fused.points[i].head<3>();
@@ -573,6 +593,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3)) {
       result.room_placement_sigma_mm = MeanOffsetSigmaMm(offsets, 0.002, &result.room_placement_frames);
       const Rigid3d& C = *delta;
+      room_offset = C;
       result.surface_offset_shift_m = C * centre - centre;
       fused.Transform(C);
       for (ScanFrame& f : frames) {
@@ -712,8 +733,44 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     result.alignment_method_kind = AlignmentMethod::kAutomatic;
     result.alignment_method = "automatic";
   }
-  const RegistrationResult refined =
+  RegistrationResult refined =
       RefineOnModel(body, model_dense, model_tree, room_from_model_initial.Inverse(), options.threads);
+  // Breathing: the parts of the surface that moved during the scan (from
+  // the fused frames themselves, surface_motion.h) are left out of a second
+  // refinement when enough still surface remains.
+  if (options.align_on_still_surface) {
+    std::vector<SurfaceMotionFrame> motion_frames;
+    for (size_t k = 0; k < recon_reports.size(); ++k) {
+      if (!recon_reports[k].fused) continue;
+      motion_frames.push_back({&*frames[recon_frame_of[k]].cloud,
+                               room_offset * anchor.Inverse() * recon_reports[k].world_from_camera});
+    }
+    const Rigid3d model_from_room = refined.target_from_source;
+    result.surface_motion = MeasureSurfaceMotion(motion_frames, model_dense, model_tree, model_from_room);
+    if (result.surface_motion.moving_patches > 0) {
+      std::vector<size_t> still;
+      const double max_sq = 0.015 * 0.015;
+      for (size_t i = 0; i < body.size(); ++i) {
+        const Eigen::Vector3d p = model_from_room * body.point3(i);
+        size_t nearest = 0;
+        double sq = 0;
+        if (model_tree.Nearest(Eigen::Vector4d(p.x(), p.y(), p.z(), 1), &nearest, &sq, max_sq) &&
+            result.surface_motion.IsMoving(model_dense.point3(nearest))) {
+          continue;
+        }
+        still.push_back(i);
+      }
+      result.still_surface_points = static_cast<int>(still.size());
+      if (static_cast<double>(still.size()) >= options.min_still_surface_share * static_cast<double>(body.size())) {
+        const RegistrationResult on_still =
+            RefineOnModel(body.Select(still), model_dense, model_tree, refined.target_from_source, options.threads);
+        if (on_still.converged) {
+          refined = on_still;
+          result.aligned_on_still_surface = true;
+        }
+      }
+    }
+  }
   result.room_from_model = refined.target_from_source.Inverse();
   result.alignment_fitness = refined.fitness;
   result.alignment_rmse_m = refined.rmse_m;

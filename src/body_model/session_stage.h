@@ -22,7 +22,11 @@
 ///  4. alignment of the reference model to the reconstruction: manual (a
 ///     given 4x4) or automatic (global registration with the target pose as
 ///     prior, ambiguity reported), each refined by point-to-plane ICP of the
-///     reconstruction onto the densely sampled model surface.
+///     reconstruction onto the densely sampled model surface; then the parts
+///     of the surface that moved during the scan (breathing, measured from
+///     the fused frames: surface_motion.h) are left out and the ICP repeated
+///     on the still parts, so that the model is not lifted by the mean of a
+///     breathing chest.
 ///
 /// Frames: the session's body frame is the room frame during the scan, so
 /// `body_from_marker` = `room_from_marker` and `reconstruction_from_model` =
@@ -41,6 +45,7 @@
 #include <vector>
 
 #include "body_model/body_marker_map.h"
+#include "body_model/surface_motion.h"
 #include "controllers/controller.h"
 #include "geometry/rigid3.h"
 #include "geometry/triangle_mesh.h"
@@ -98,6 +103,12 @@ struct SessionStageOptions {
   /// Stickers this camera reads only closer than this (m, face-on) are
   /// reported as a warning: tracking from farther loses the patient.
   double min_sticker_reading_distance_m = 1.2;
+  /// Breathing: measure which parts of the surface moved during the scan
+  /// (surface_motion.h) and refine the alignment once more on the still
+  /// parts, when they hold at least `min_still_surface_share` of the
+  /// reconstruction's points.
+  bool align_on_still_surface = true;
+  double min_still_surface_share = 0.3;
   int poisson_depth = 8;
   int threads = 2;
 
@@ -162,6 +173,12 @@ struct SessionStageResult {
   /// How far this camera reads the stickers face-on (m): where they are
   /// ReadableMarkerSidePx across.
   double sticker_reading_distance_m = 0;
+  /// Which parts of the surface moved during the scan (breathing), and
+  /// whether the alignment was refined on the still parts alone (their
+  /// reconstruction points).
+  SurfaceMotion surface_motion;
+  bool aligned_on_still_surface = false;
+  int still_surface_points = 0;
   /// What the user should know (a weakly placed scan, stickers too small for
   /// the tracking distance), with what to do.
   std::vector<std::string> warnings;
