@@ -780,6 +780,14 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   result.times.alignment_s = SecondsSince(t0);
   for (const auto& m : result.marker_map.markers) {
     result.model_from_markers[m.marker_id] = result.room_from_model.Inverse() * m.room_from_marker;
+    // The sticker's patch: that of the surface point nearest its centre.
+    const Eigen::Vector3d centre = result.model_from_markers[m.marker_id].translation;
+    size_t nearest = 0;
+    double sq = 0;
+    if (model_tree.Nearest(Eigen::Vector4d(centre.x(), centre.y(), centre.z(), 1), &nearest, &sq, 0.02 * 0.02)) {
+      const double motion = result.surface_motion.MotionAt(model_dense.point3(nearest));
+      if (motion > 0) result.sticker_motion_m[m.marker_id] = motion;
+    }
   }
   return result;
 }
@@ -843,8 +851,12 @@ void StoreSession(Database* database, const CaseFolder& folder, const SessionSta
     map.recording_id = result->recording_id;
     map.marker_size_m = folder.config.body_markers.size_m;
     for (const auto& m : result->marker_map.markers) {
-      map.markers.push_back({m.marker_id, m.room_from_marker, m.rms_px, m.num_views});
+      const auto motion = result->sticker_motion_m.find(m.marker_id);
+      map.markers.push_back({m.marker_id, m.room_from_marker, m.rms_px, m.num_views,
+                             motion != result->sticker_motion_m.end() ? motion->second : 0.0});
     }
+    map.surface_patch_m = result->surface_motion.patch_m;
+    map.moving_surface_patches = result->surface_motion.MovingPatchCentres();
     map.mean_residual_px = result->marker_map.mean_rms_px;
     map.max_residual_px = std::max(result->marker_map.max_rms_px, map.mean_residual_px);
     result->body_marker_map_id = database->AddBodyMarkerMap(map);

@@ -179,6 +179,10 @@ struct SessionStageResult {
   SurfaceMotion surface_motion;
   bool aligned_on_still_surface = false;
   int still_surface_points = 0;
+  /// Per sticker that sits on a moving patch: how far it moved (1 sigma, m;
+  /// SurfaceMotion::MotionAt its centre). Stored with the body marker map
+  /// for tracking.
+  std::map<int, double> sticker_motion_m;
   /// What the user should know (a weakly placed scan, stickers too small for
   /// the tracking distance), with what to do.
   std::vector<std::string> warnings;

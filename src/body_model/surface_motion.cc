@@ -52,6 +52,26 @@ bool SurfaceMotion::IsMoving(const Eigen::Vector3d& point_in_model) const {
   return it != patch_by_key.end() && it->second.moving;
 }
 
+double SurfaceMotion::MotionAt(const Eigen::Vector3d& point_in_model) const {
+  if (!measured) return 0;
+  const auto it = patch_by_key.find(SurfacePatchKey(point_in_model, patch_m));
+  return it != patch_by_key.end() && it->second.moving ? it->second.motion_m : 0;
+}
+
+std::vector<Eigen::Vector3d> SurfaceMotion::MovingPatchCentres() const {
+  std::vector<uint64_t> keys;
+  for (const auto& [key, patch] : patch_by_key) {
+    if (measured && patch.moving) keys.push_back(key);
+  }
+  std::sort(keys.begin(), keys.end());
+  std::vector<Eigen::Vector3d> centres;
+  const auto coordinate = [this](uint64_t key, int shift) {
+    return (static_cast<double>(static_cast<int64_t>((key >> shift) & 0x1FFFFF) - (1 << 20)) + 0.5) * patch_m;
+  };
+  for (const uint64_t key : keys) centres.emplace_back(coordinate(key, 42), coordinate(key, 21), coordinate(key, 0));
+  return centres;
+}
+
 std::string SurfaceMotion::Describe() const {
   if (!measured) {
     return StringPrintf("surface motion not measured (%d frames, %d patches seen often enough)", frames, patches);

@@ -84,6 +84,11 @@ struct SurfaceMotion {
   /// Whether the surface near `point_in_model` (a reference-surface point,
   /// model frame) moved; false where nothing was measured.
   bool IsMoving(const Eigen::Vector3d& point_in_model) const;
+  /// How far the surface near `point_in_model` moved with the common time
+  /// course (1 sigma, m): its patch's motion_m where that patch moved, else 0.
+  double MotionAt(const Eigen::Vector3d& point_in_model) const;
+  /// The centres of the patches that moved (model frame), in key order.
+  std::vector<Eigen::Vector3d> MovingPatchCentres() const;
   /// For people: "N of M surface patches moved (by up to X mm) ..." or why
   /// nothing could be told.
   std::string Describe() const;

@@ -154,6 +154,9 @@ std::string AuditedRowHash(sqlite3* db, const std::string& entity) {
       AppendRows(db, "SELECT * FROM room_map_markers WHERE room_map_id = ?1 ORDER BY marker_id", id, &data);
     } else if (kind == "body_marker_map") {
       AppendRows(db, "SELECT * FROM body_marker_poses WHERE body_marker_map_id = ?1 ORDER BY marker_id", id, &data);
+      // Schema 9; a map without breathing rows hashes as before.
+      AppendRows(db, "SELECT * FROM body_marker_motion WHERE body_marker_map_id = ?1 ORDER BY marker_id", id, &data);
+      AppendRows(db, "SELECT * FROM body_surface_motion WHERE body_marker_map_id = ?1", id, &data);
     } else if (kind == "tracking_run") {
       AppendRows(db, "SELECT * FROM tracking_frames WHERE tracking_run_id = ?1 ORDER BY frame_index", id, &data);
     }

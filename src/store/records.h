@@ -221,6 +221,9 @@ struct BodyMarker {
   Rigid3d body_from_marker;
   double residual_px = 0;
   int num_observations = 0;
+  /// How far the sticker moved along its normal with the breathing during
+  /// the scan (1 sigma, m; 0: it did not, or nothing could be told).
+  double motion_m = 0;
 };
 
 struct BodyMarkerMapRecord {
@@ -231,6 +234,11 @@ struct BodyMarkerMapRecord {
   std::vector<BodyMarker> markers;          ///< marker ids unique
   double mean_residual_px = 0;
   double max_residual_px = 0;  ///< >= mean_residual_px
+  /// The reference model's surface patches that moved during the scan
+  /// (breathing): centres of cubes of `surface_patch_m`, model frame. Empty:
+  /// nothing moved, or nothing could be told.
+  double surface_patch_m = 0;
+  std::vector<Eigen::Vector3d> moving_surface_patches;
   std::int64_t created_unix_ms = 0;
 };
 

@@ -696,6 +696,26 @@ BodyMarkerMapId SqliteDatabase::AddBodyMarkerMap(const BodyMarkerMapRecord& map)
     s->BindDouble(4, marker.residual_px);
     s->BindInt64(5, marker.num_observations);
     s->Execute();
+    if (marker.motion_m > 0) {
+      SqliteStatementGuard m(
+          Prepared("INSERT INTO body_marker_motion (body_marker_map_id, marker_id, motion_m) VALUES (?1, ?2, ?3)"));
+      m->BindId(1, id);
+      m->BindInt64(2, marker.marker_id);
+      m->BindDouble(3, marker.motion_m);
+      m->Execute();
+    }
+  }
+  if (!map.moving_surface_patches.empty()) {
+    Eigen::MatrixXd centres(map.moving_surface_patches.size(), 3);
+    for (size_t i = 0; i < map.moving_surface_patches.size(); ++i) {
+      centres.row(static_cast<Eigen::Index>(i)) = map.moving_surface_patches[i].transpose();
+    }
+    SqliteStatementGuard m(Prepared(
+        "INSERT INTO body_surface_motion (body_marker_map_id, patch_m, moving_patches) VALUES (?1, ?2, ?3)"));
+    m->BindId(1, id);
+    m->BindDouble(2, map.surface_patch_m);
+    m->BindBlob(3, EncodeMatrix(centres));
+    m->Execute();
   }
   transaction.Commit();
   return id;
@@ -731,6 +751,31 @@ std::optional<BodyMarkerMapRecord> SqliteDatabase::GetBodyMarkerMap(BodyMarkerMa
     marker.residual_px = s->ColumnDouble(2);
     marker.num_observations = static_cast<int>(s->ColumnInt64(3));
     map.markers.push_back(marker);
+  }
+  {
+    SqliteStatementGuard m(
+        Prepared("SELECT marker_id, motion_m FROM body_marker_motion WHERE body_marker_map_id = ?1"));
+    m->BindId(1, id);
+    while (m->Step()) {
+      const int marker_id = static_cast<int>(m->ColumnInt64(0));
+      for (BodyMarker& marker : map.markers) {
+        if (marker.marker_id == marker_id) marker.motion_m = m->ColumnDouble(1);
+      }
+    }
+  }
+  SqliteStatementGuard m(
+      Prepared("SELECT patch_m, moving_patches FROM body_surface_motion WHERE body_marker_map_id = ?1"));
+  m->BindId(1, id);
+  if (m->Step()) {
+    map.surface_patch_m = m->ColumnDouble(0);
+    const Eigen::MatrixXd centres = DecodeMatrix(
+        m->ColumnBlob(1), "body_surface_motion.moving_patches of body marker map " + std::to_string(id.value()));
+    if (centres.rows() > 0 && centres.cols() != 3) {
+      throw CorruptBlobError("body_surface_motion.moving_patches of body marker map " +
+                             std::to_string(id.value()) + ": " + std::to_string(centres.cols()) +
+                             " columns, expected 3");
+    }
+    for (Eigen::Index i = 0; i < centres.rows(); ++i) map.moving_surface_patches.push_back(centres.row(i).transpose());
   }
   return map;
 }

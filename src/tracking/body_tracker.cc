@@ -1,10 +1,12 @@
 #include "tracking/body_tracker.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <deque>
 #include <limits>
+#include <set>
 
 #include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
@@ -13,6 +15,7 @@
 #include "features/edge_refinement.h"
 #include "geometry/so3.h"
 #include "registration/mesh_cloud.h"
+#include "tracking/sticker_terms.h"
 #include "util/check.h"
 #include "util/logging.h"
 #include "util/string_util.h"
@@ -36,6 +39,10 @@ std::string BodyTrackerOptions::Validate() const {
   if (max_iterations < 1) return "max_iterations must be at least 1";
   if (!(convergence_m > 0) || !(convergence_rad > 0)) return "convergence tolerances must be positive";
   if (!(max_sticker_rms_px > 0)) return "max_sticker_rms_px must be positive";
+  for (const auto& [id, motion] : sticker_motion_m) {
+    if (!(motion >= 0 && motion < 0.05)) return "sticker_motion_m of sticker " + std::to_string(id) + " must be in [0, 5 cm)";
+  }
+  if (!(moving_surface_patch_m > 0)) return "moving_surface_patch_m must be positive";
   if (!(sticker_window_margin_px >= 0)) return "sticker_window_margin_px must not be negative";
   if (max_stickers_searched < 1) return "max_stickers_searched must be at least 1";
   if (!(detection_side_px >= 8)) return "detection_side_px must be at least 8";
@@ -88,6 +95,8 @@ struct SeenSticker {
   std::array<double, 4> sigma_px{};
   MarkerPose single_view;
   Rigid3d marker_from_model;
+  double motion_m = 0;                 ///< breathing along its normal (1 sigma)
+  Eigen::Vector3d normal_in_model = Eigen::Vector3d::UnitZ();
 };
 
 // A sticker observation from an edge-line refinement started at `initial`.
@@ -331,7 +340,18 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
   const PointCloud surface = SampleMeshSurface(model, options_.model_spacing_m);
   m.model_points.reserve(surface.size());
   m.model_normals.reserve(surface.size());
+  // The surface that moved during the scan (breathing) is left out of the
+  // depth term: cells of the patches' grid.
+  const double patch = options_.moving_surface_patch_m;
+  const auto cell = [patch](const Eigen::Vector3d& p) {
+    return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(p.x() / patch)),
+                                  static_cast<int64_t>(std::floor(p.y() / patch)),
+                                  static_cast<int64_t>(std::floor(p.z() / patch))};
+  };
+  std::set<std::array<int64_t, 3>> moving_cells;
+  for (const Eigen::Vector3d& c : options_.moving_surface_patches) moving_cells.insert(cell(c));
   for (size_t i = 0; i < surface.size(); ++i) {
+    if (!moving_cells.empty() && moving_cells.count(cell(surface.point3(i)))) continue;
     m.model_points.push_back(surface.point3(i));
     m.model_normals.push_back(surface.normal3(i));
   }
@@ -457,6 +477,10 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
       SeenSticker s;
       s.id = obs.id;
       s.marker_from_model = it->second.Inverse();
+      s.normal_in_model = it->second.rotation * Eigen::Vector3d::UnitZ();
+      if (const auto motion = o.sticker_motion_m.find(obs.id); motion != o.sticker_motion_m.end()) {
+        s.motion_m = motion->second;
+      }
       for (int c = 0; c < 4; ++c) {
         s.corners_in_model[c] = it->second * m.corners_in_marker[c];
         s.sigma_px[c] = std::max(o.corner_sigma_px, obs.corner_sigma_px[c]);
@@ -582,25 +606,32 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
       for (size_t si = 0; si < stickers.size(); ++si) {
         if (!use[si]) continue;
         const SeenSticker& s = stickers[si];
+        // The sticker's whitened corner residuals (up to 8 rows), their
+        // Jacobian, and how they move with the sticker along its normal.
+        StickerResiduals r = StickerResiduals::Zero(), b = StickerResiduals::Zero();
+        StickerJacobian J = StickerJacobian::Zero();
+        const Eigen::Vector3d normal = pose.rotation * s.normal_in_model;
+        int rows = 0;
         for (int c = 0; c < 4; ++c) {
           const Eigen::Vector3d p = pose * s.corners_in_model[c];
           if (p.z() < 1e-3) continue;
           const double iz = 1.0 / p.z();
-          const Eigen::Vector2d r(m.K.fx * (p.x() * iz - s.normalised[c].x()) / s.sigma_px[c],
-                                  m.K.fy * (p.y() * iz - s.normalised[c].y()) / s.sigma_px[c]);
+          const Eigen::Vector2d rc(m.K.fx * (p.x() * iz - s.normalised[c].x()) / s.sigma_px[c],
+                                   m.K.fy * (p.y() * iz - s.normalised[c].y()) / s.sigma_px[c]);
           Eigen::Matrix<double, 2, 3> dproj;
           dproj << m.K.fx * iz / s.sigma_px[c], 0, -m.K.fx * p.x() * iz * iz / s.sigma_px[c], 0,
               m.K.fy * iz / s.sigma_px[c], -m.K.fy * p.y() * iz * iz / s.sigma_px[c];
           Eigen::Matrix<double, 3, 6> dp;
           dp << -Skew(p), Eigen::Matrix3d::Identity();
-          const Eigen::Matrix<double, 2, 6> J = dproj * dp;
-          const double norm = r.norm();
-          const double w = norm <= o.huber_sigmas ? 1.0 : o.huber_sigmas / norm;
-          H += w * J.transpose() * J;
-          g += w * J.transpose() * r;
-          chi2 += w * r.squaredNorm();
+          const double norm = rc.norm();
+          const double sw = std::sqrt(norm <= o.huber_sigmas ? 1.0 : o.huber_sigmas / norm);
+          r.segment<2>(rows) = sw * rc;
+          J.middleRows<2>(rows) = sw * dproj * dp;
+          b.segment<2>(rows) = sw * dproj * normal;
+          rows += 2;
           dof += 2;
         }
+        AddStickerTerms(r, J, b, s.motion_m, &H, &g, &chi2);
       }
       // Depth: projective association of the visible model points.
       depth_inliers = 0;

@@ -105,6 +105,18 @@ struct BodyTrackerOptions {
 
   /// A sticker whose corner RMS exceeds this after the fit is dropped.
   double max_sticker_rms_px = 1.2;
+  /// Breathing (from the session: body_model/surface_motion.h). Per sticker
+  /// id, how far it moves along its normal with the breathing (1 sigma, m):
+  /// its four corners share that uncertainty along the normal (marginalised
+  /// in the fit), so the still stickers and the still surface decide the
+  /// pose in that direction while a moving sticker still holds the others.
+  /// Stickers not listed do not move.
+  std::map<int, double> sticker_motion_m;
+  /// Centres of the surface patches (model frame, cubes of
+  /// `moving_surface_patch_m`) that moved during the scan: model points in
+  /// them are left out of the depth term.
+  std::vector<Eigen::Vector3d> moving_surface_patches;
+  double moving_surface_patch_m = 0.04;
   /// While tracking, each sticker is searched in a window around its
   /// predicted corners (margin: max(this, 0.75 side), px), upsampled so the
   /// sticker is about `detection_side_px` across for ArUco (at most 4x), its

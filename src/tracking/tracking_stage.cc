@@ -151,7 +151,12 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   in.sticker_size_m = markers->marker_size_m;
   in.room_from_model_at_scan = pieces->alignment.reconstruction_from_model;
   const Rigid3d model_from_body = pieces->alignment.reconstruction_from_model.Inverse();
-  for (const auto& m : markers->markers) in.model_from_marker[m.marker_id] = model_from_body * m.body_from_marker;
+  for (const auto& m : markers->markers) {
+    in.model_from_marker[m.marker_id] = model_from_body * m.body_from_marker;
+    if (m.motion_m > 0) in.sticker_motion_m[m.marker_id] = m.motion_m;
+  }
+  in.moving_surface_patches = markers->moving_surface_patches;
+  in.surface_patch_m = markers->surface_patch_m;
   if (in.model_from_marker.empty()) {
     ARPOS_INPUT_ERROR("session " << chosen.value() << ": its body marker map holds no sticker");
   }
@@ -292,6 +297,10 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
 
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;
+  // Breathing, as the session measured it.
+  tracker_options.body.sticker_motion_m = inputs.sticker_motion_m;
+  tracker_options.body.moving_surface_patches = inputs.moving_surface_patches;
+  if (inputs.surface_patch_m > 0) tracker_options.body.moving_surface_patch_m = inputs.surface_patch_m;
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;
   Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target, camera,
                   tracker_options, inputs.room_from_model_at_scan);

@@ -48,6 +48,12 @@ struct TrackingInputs {
   /// reconstruction_from_model^-1 * body_from_marker.
   std::map<int, Rigid3d> model_from_marker;
   double sticker_size_m = 0;
+  /// Breathing as the session measured it: per moving sticker how far it
+  /// moved along its normal (1 sigma, m), and the moving surface patches
+  /// (model frame, cubes of `surface_patch_m`). Empty when nothing moved.
+  std::map<int, double> sticker_motion_m;
+  std::vector<Eigen::Vector3d> moving_surface_patches;
+  double surface_patch_m = 0;
   /// The patient's pose at the session's body scan (the alignment): where
   /// tracking looks first.
   Rigid3d room_from_model_at_scan;

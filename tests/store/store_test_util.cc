@@ -137,8 +137,11 @@ FullStore WriteFullStore(Database& database, unsigned seed) {
     marker.body_from_marker = RandomPose(rng);
     marker.residual_px = 0.4;
     marker.num_observations = 60;
+    marker.motion_m = id == 105 ? 0.0012 : 0.0;  // one sticker moved with the breathing
     s.body_marker_map.markers.push_back(marker);
   }
+  s.body_marker_map.surface_patch_m = 0.04;
+  s.body_marker_map.moving_surface_patches = {{0.02, -0.1, 0.06}, {-0.02, -0.1, 0.1}};
   s.body_marker_map.mean_residual_px = 0.4;
   s.body_marker_map.max_residual_px = 1.1;
   s.body_marker_map.created_unix_ms = 1700000102000;
@@ -346,6 +349,12 @@ void ExpectFullStoreEq(Database& database, const FullStore& s) {
                  body_map->markers[i].body_from_marker);
     EXPECT_EQ(body_map->markers[i].residual_px, s.body_marker_map.markers[i].residual_px);
     EXPECT_EQ(body_map->markers[i].num_observations, s.body_marker_map.markers[i].num_observations);
+    EXPECT_EQ(body_map->markers[i].motion_m, s.body_marker_map.markers[i].motion_m);
+  }
+  EXPECT_EQ(body_map->surface_patch_m, s.body_marker_map.surface_patch_m);
+  ASSERT_EQ(body_map->moving_surface_patches.size(), s.body_marker_map.moving_surface_patches.size());
+  for (std::size_t i = 0; i < s.body_marker_map.moving_surface_patches.size(); ++i) {
+    EXPECT_EQ(body_map->moving_surface_patches[i], s.body_marker_map.moving_surface_patches[i]);
   }
 
   const auto reconstruction = database.GetReconstruction(s.reconstruction.id);

@@ -1,0 +1,113 @@
+// A sticker that breathes: its corners' terms in the body fit give up what
+// moving along the sticker's normal would explain and keep the rest
+// (tracking/sticker_terms.h).
+#include <gtest/gtest.h>
+
+#include <array>
+
+#include <Eigen/Geometry>
+
+#include "tracking/sticker_terms.h"
+
+namespace arpos {
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d s;
+  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return s;
+}
+
+// A 3 cm sticker 0.8 m in front of a 525 px camera, tilted 30 degrees, its
+// corners whitened at 0.2 px: residuals (zero), the Jacobian for a left
+// perturbation of the pose (rotation, translation) and b, the corners'
+// motion per metre along the sticker's normal.
+struct Sticker {
+  StickerResiduals r = StickerResiduals::Zero(), b = StickerResiduals::Zero();
+  StickerJacobian J = StickerJacobian::Zero();
+  Eigen::Vector3d normal;
+};
+
+Sticker MakeSticker() {
+  Sticker s;
+  const double f = 525, sigma = 0.2, half = 0.015;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5236, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const Eigen::Vector3d centre(0.05, -0.02, 0.8);
+  s.normal = R * Eigen::Vector3d(0, 0, -1);
+  const std::array<Eigen::Vector2d, 4> corners = {Eigen::Vector2d(-half, half), Eigen::Vector2d(half, half),
+                                                  Eigen::Vector2d(half, -half), Eigen::Vector2d(-half, -half)};
+  for (int c = 0; c < 4; ++c) {
+    const Eigen::Vector3d p = centre + R * Eigen::Vector3d(corners[c].x(), corners[c].y(), 0);
+    const double iz = 1 / p.z();
+    Eigen::Matrix<double, 2, 3> dproj;
+    dproj << f * iz / sigma, 0, -f * p.x() * iz * iz / sigma, 0, f * iz / sigma, -f * p.y() * iz * iz / sigma;
+    Eigen::Matrix<double, 3, 6> dp;
+    dp << -Skew(p), Eigen::Matrix3d::Identity();
+    s.J.middleRows<2>(2 * c) = dproj * dp;
+    s.b.segment<2>(2 * c) = dproj * s.normal;
+  }
+  return s;
+}
+
+TEST(StickerTerms, AStillStickerIsThePlainSum) {
+  const Sticker s = MakeSticker();
+  StickerResiduals r;
+  r << 0.3, -0.2, 0.1, 0.4, -0.5, 0.2, 0.0, -0.1;
+  Matrix6d H = Matrix6d::Zero();
+  Vector6d g = Vector6d::Zero();
+  double chi2 = 0;
+  AddStickerTerms(r, s.J, s.b, 0.0, &H, &g, &chi2);
+  EXPECT_TRUE(H.isApprox(s.J.transpose() * s.J));
+  EXPECT_TRUE(g.isApprox(s.J.transpose() * r));
+  EXPECT_DOUBLE_EQ(chi2, r.squaredNorm());
+}
+
+TEST(StickerTerms, ABreathingStickerGivesUpItsNormalAndKeepsTheRest) {
+  const Sticker s = MakeSticker();
+  // The pose moved along the sticker's normal moves its corners by b.
+  Vector6d along_normal, across;
+  along_normal << 0, 0, 0, s.normal;
+  // Sideways (camera x, across the normal): what the corners show of it is
+  // nothing like what breathing does to them.
+  across << 0, 0, 0, 1, 0, 0;
+  ASSERT_NEAR(s.normal.x(), 0, 1e-12);
+  ASSERT_TRUE((s.J * along_normal).isApprox(s.b));
+  const auto information = [&](double motion_m, const Vector6d& v) {
+    Matrix6d H = Matrix6d::Zero();
+    Vector6d g = Vector6d::Zero();
+    double chi2 = 0;
+    AddStickerTerms(s.r, s.J, s.b, motion_m, &H, &g, &chi2);
+    return v.dot(H * v);
+  };
+  const double still_along = information(0, along_normal), still_across = information(0, across);
+  // 1.5 mm of breathing: along the normal the sticker is worth what 1.5 mm
+  // allows (1 / 1.5 mm^2 at most), sideways almost all it was.
+  const double breathing_along = information(0.0015, along_normal);
+  EXPECT_LT(breathing_along, 1.0 / (0.0015 * 0.0015));
+  EXPECT_LT(breathing_along, 0.05 * still_along);
+  EXPECT_GT(information(0.0015, across), 0.9 * still_across);
+  // More motion, less information along the normal; none without bound.
+  EXPECT_LT(information(0.01, along_normal), breathing_along);
+  EXPECT_LT(information(1.0, along_normal), 1e-3 * still_along);
+}
+
+TEST(StickerTerms, ResidualsBreathingCanExplainCostLittle) {
+  const Sticker s = MakeSticker();
+  // Corners 1 mm along the normal from where the pose puts them.
+  const StickerResiduals r = 0.001 * s.b;
+  Matrix6d H = Matrix6d::Zero();
+  Vector6d g = Vector6d::Zero();
+  double still = 0, breathing = 0;
+  AddStickerTerms(r, s.J, s.b, 0, &H, &g, &still);
+  AddStickerTerms(r, s.J, s.b, 0.0015, &H, &g, &breathing);
+  EXPECT_GT(still, 1);
+  // What is left is the prior's cost of 1 mm at 1.5 mm: (1/1.5)^2, a little less.
+  EXPECT_LT(breathing, 0.45);
+  EXPECT_GT(breathing, 0.3);
+}
+
+}  // namespace
+}  // namespace arpos
