@@ -199,6 +199,66 @@ TEST(AuditChain, AnApprovalOrASessionEndWrittenPastTheProgramIsNamed) {
       << Verify(unlocked).ToText();
 }
 
+// The breathing a session measured (schema 9) is part of its body marker
+// map's sealed row: changing a sticker's motion or the moving surface with
+// sqlite3 is named; a map without them seals as before.
+TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
+  TempDir dir;
+  const fs::path path = dir.path() / "store.db";
+  {
+    const auto db = SqliteDatabase::Open(path.string());
+    PatientRecord patient;
+    patient.external_id = "P-003";
+    PlanRecord plan;
+    plan.patient_id = db->AddPatient(patient);
+    db->AppendAudit({AuditId(), 0, "tech", "add_patient", "patient:1", ""});
+    plan.name = "plan";
+    plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}};
+    plan.reference_model.faces = {{0, 1, 2}};
+    db->AddPlan(plan);
+    db->AppendAudit({AuditId(), 0, "tech", "add_plan", "plan:1", ""});
+    SessionRecord session;
+    session.plan_id = PlanId(1);
+    db->AddSession(session);
+    db->AppendAudit({AuditId(), 0, "ana (therapist)", "open_session", "session:1", ""});
+    for (const bool breathing : {true, false}) {
+      BodyMarkerMapRecord map;
+      map.session_id = SessionId(1);
+      map.marker_size_m = 0.03;
+      map.markers = {{101, Rigid3d::Identity(), 0.2, 10, breathing ? 0.0012 : 0.0},
+                     {102, Rigid3d::Identity(), 0.2, 10, 0.0}};
+      if (breathing) {
+        map.surface_patch_m = 0.04;
+        map.moving_surface_patches = {{0.02, -0.1, 0.06}};
+      }
+      const BodyMarkerMapId id = db->AddBodyMarkerMap(map);
+      db->AppendAudit({AuditId(), 0, "ana (therapist)", "add_body_marker_map",
+                       "body_marker_map:" + std::to_string(id.value()), ""});
+    }
+    const auto map = db->GetBodyMarkerMap(BodyMarkerMapId(1));
+    ASSERT_TRUE(map.has_value());
+    EXPECT_EQ(map->markers[0].motion_m, 0.0012);
+    EXPECT_EQ(map->markers[1].motion_m, 0.0);
+    ASSERT_EQ(map->moving_surface_patches.size(), 1u);
+    EXPECT_TRUE(db->GetBodyMarkerMap(BodyMarkerMapId(2))->moving_surface_patches.empty());
+  }
+  EXPECT_TRUE(Verify(path).ok()) << Verify(path).ToText();
+
+  const fs::path motion = CopyOf(path, "motion.db");
+  RawExec(motion, "UPDATE body_marker_motion SET motion_m = 0.0001 WHERE marker_id = 101");
+  EXPECT_NE(Verify(motion).ToText().find("body_marker_map:1 differs from what audit entry"), std::string::npos)
+      << Verify(motion).ToText();
+  const fs::path surface = CopyOf(path, "surface.db");
+  RawExec(surface, "DELETE FROM body_surface_motion WHERE body_marker_map_id = 1");
+  EXPECT_NE(Verify(surface).ToText().find("body_marker_map:1 differs from what audit entry"), std::string::npos)
+      << Verify(surface).ToText();
+  // A motion row added to the map that had none.
+  const fs::path added = CopyOf(path, "added.db");
+  RawExec(added, "INSERT INTO body_marker_motion VALUES (2, 102, 0.002)");
+  EXPECT_NE(Verify(added).ToText().find("body_marker_map:2 differs from what audit entry"), std::string::npos)
+      << Verify(added).ToText();
+}
+
 TEST(AuditChain, EntriesFromBeforeTheChainAreCountedApartAndTheChainStartsAfterThem) {
   TempDir dir("arpos_audit");
   const fs::path path = dir.path() / "old.db";
