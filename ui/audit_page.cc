@@ -552,6 +552,7 @@ void AuditPage::ShowDetail(QTreeWidgetItem* item) {
                      .arg(1000 * m.marker_size_m, 0, 'f', 0)
                      .arg(m.mean_residual_px, 0, 'f', 3)
                      .arg(m.max_residual_px, 0, 'f', 3);
+        lines << tr("Breathing: %1.").arg(Q(DescribeBreathing(m)));
       }
     }
   } catch (const std::exception& e) {

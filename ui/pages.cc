@@ -725,6 +725,7 @@ void SessionPage::ShowSession(int row) {
                    .arg(map->markers.size())
                    .arg(map->mean_residual_px, 0, 'f', 3)
                    .arg(map->max_residual_px, 0, 'f', 3);
+      lines << tr("Breathing: %1.").arg(Q(DescribeBreathing(*map)));
       // Each sticker as its printed square, 2 mm above the skin so the
       // surfaces do not hide it.
       TriangleMesh stickers;

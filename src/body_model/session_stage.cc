@@ -818,6 +818,10 @@ void StoreSession(Database* database, const CaseFolder& folder, const SessionSta
     session.fraction = static_cast<int>(database->ListSessions(plan_id).size()) + 1;
     session.operator_name = options.op.Actor();
     session.notes = "session stage on " + folder.root.string() + "; " + result->RoomPlacementText();
+    if (result->surface_motion.frames > 0) {
+      session.notes += "; " + result->surface_motion.Describe() +
+                       (result->aligned_on_still_surface ? "; the model aligned to the still surface" : "");
+    }
     for (const std::string& w : result->warnings) session.notes += "; warning: " + w;
     session.on_unapproved_plan = result->on_unapproved_plan;
     // The plan's approval as it is when the session opens (inside the

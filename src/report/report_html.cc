@@ -319,6 +319,10 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
             {true, true, false, true, true, true, false});
     }
     h.EndTable();
+    // What the scan measured of the breathing, which tracking allows for.
+    for (const BodyMarkerMapRecord& m : r.body_marker_maps) {
+      h << "<p>Breathing (map " << std::to_string(m.id.value()) << "): " << E(DescribeBreathing(m)) << ".</p>\n";
+    }
   }
 
   h << "<h2>Reconstruction</h2>\n";

@@ -108,6 +108,32 @@ std::string FormatVector3(const Eigen::Vector3d& v, int decimals) {
   return text;
 }
 
+std::string DescribeBreathing(const BodyMarkerMapRecord& map) {
+  std::string ids;
+  double lo = 0, hi = 0;
+  for (const BodyMarker& m : map.markers) {
+    if (!(m.motion_m > 0)) continue;
+    lo = ids.empty() ? m.motion_m : std::min(lo, m.motion_m);
+    hi = std::max(hi, m.motion_m);
+    ids += (ids.empty() ? "" : ", ") + std::to_string(m.marker_id);
+  }
+  if (ids.empty() && map.moving_surface_patches.empty()) {
+    return "no sticker or surface patch moved with the breathing (or the scan could not tell)";
+  }
+  char text[160];
+  std::string out;
+  if (ids.empty()) {
+    out = "no sticker moved with the breathing";
+  } else {
+    std::snprintf(text, sizeof text, " moved with the breathing (%.1f-%.1f mm, 1 sigma along their normals)",
+                  1000 * lo, 1000 * hi);
+    out = (ids.find(',') == std::string::npos ? "sticker " : "stickers ") + ids + text;
+  }
+  std::snprintf(text, sizeof text, "; %zu surface patches of %.0f mm moved", map.moving_surface_patches.size(),
+                1000 * map.surface_patch_m);
+  return out + text;
+}
+
 std::string VerificationLine(const AuditVerification& v) {
   std::string line;
   if (v.ok()) {
