@@ -146,6 +146,26 @@ TEST(AuditChain, EachKindOfTamperingIsNamed) {
   EXPECT_TRUE(Verify(path).ok());
 }
 
+// A patient, `plans` plans and session 1 on plan 1, each with its audit entry.
+void AddAuditedSession(SqliteDatabase* db, int plans) {
+  PatientRecord patient;
+  patient.external_id = "P-002";
+  PlanRecord plan;
+  plan.patient_id = db->AddPatient(patient);
+  db->AppendAudit({AuditId(), 0, "tech", "add_patient", "patient:1", ""});
+  plan.name = "plan";
+  plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}};
+  plan.reference_model.faces = {{0, 1, 2}};
+  for (int i = 0; i < plans; ++i) {
+    const PlanId id = db->AddPlan(plan);
+    db->AppendAudit({AuditId(), 0, "tech", "add_plan", "plan:" + std::to_string(id.value()), ""});
+  }
+  SessionRecord session;
+  session.plan_id = PlanId(1);
+  db->AddSession(session);
+  db->AppendAudit({AuditId(), 0, "ana (therapist)", "open_session", "session:1", ""});
+}
+
 // Approvals and session ends are made by the audited controllers
 // (store/lifecycle.h); one made with sqlite3, any other edit of an audited
 // row, or a dropped plan trigger, is named.
@@ -154,22 +174,7 @@ TEST(AuditChain, AnApprovalOrASessionEndWrittenPastTheProgramIsNamed) {
   const fs::path path = dir.path() / "store.db";
   {
     const auto db = SqliteDatabase::Open(path.string());
-    PatientRecord patient;
-    patient.external_id = "P-002";
-    PlanRecord plan;
-    plan.patient_id = db->AddPatient(patient);
-    db->AppendAudit({AuditId(), 0, "tech", "add_patient", "patient:1", ""});
-    plan.name = "plan";
-    plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}};
-    plan.reference_model.faces = {{0, 1, 2}};
-    for (int i = 0; i < 2; ++i) {
-      const PlanId id = db->AddPlan(plan);
-      db->AppendAudit({AuditId(), 0, "tech", "add_plan", "plan:" + std::to_string(id.value()), ""});
-    }
-    SessionRecord session;
-    session.plan_id = PlanId(1);
-    db->AddSession(session);
-    db->AppendAudit({AuditId(), 0, "ana (therapist)", "open_session", "session:1", ""});
+    AddAuditedSession(db.get(), 2);
     // Plan 2 approved and the session completed the program's way.
     db->ApprovePlan(PlanId(2), "pia (physicist)", "");
     db->AppendAudit({AuditId(), 0, "pia (physicist)", "approve_plan", "plan:2", ""});
@@ -207,20 +212,7 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
   const fs::path path = dir.path() / "store.db";
   {
     const auto db = SqliteDatabase::Open(path.string());
-    PatientRecord patient;
-    patient.external_id = "P-003";
-    PlanRecord plan;
-    plan.patient_id = db->AddPatient(patient);
-    db->AppendAudit({AuditId(), 0, "tech", "add_patient", "patient:1", ""});
-    plan.name = "plan";
-    plan.reference_model.vertices = {{0, 0, 0}, {0.1f, 0, 0}, {0, 0.1f, 0}};
-    plan.reference_model.faces = {{0, 1, 2}};
-    db->AddPlan(plan);
-    db->AppendAudit({AuditId(), 0, "tech", "add_plan", "plan:1", ""});
-    SessionRecord session;
-    session.plan_id = PlanId(1);
-    db->AddSession(session);
-    db->AppendAudit({AuditId(), 0, "ana (therapist)", "open_session", "session:1", ""});
+    AddAuditedSession(db.get(), 1);
     for (const bool breathing : {true, false}) {
       BodyMarkerMapRecord map;
       map.session_id = SessionId(1);
