@@ -786,7 +786,9 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     double sq = 0;
     if (model_tree.Nearest(Eigen::Vector4d(centre.x(), centre.y(), centre.z(), 1), &nearest, &sq, 0.02 * 0.02)) {
       const double motion = result.surface_motion.MotionAt(model_dense.point3(nearest));
-      if (motion > 0) result.sticker_motion_m[m.marker_id] = motion;
+      // (5 cm and more is not breathing but a patient who moved: the
+      // store keeps motions below that.)
+      if (motion > 0 && motion < 0.05) result.sticker_motion_m[m.marker_id] = motion;
     }
   }
   return result;
