@@ -141,6 +141,20 @@ std::string SessionStageResult::RoomPlacementText() const {
                             room_placement_frames);
 }
 
+std::string SessionStageResult::SurfaceMotionText() const {
+  if (surface_motion.frames == 0) return "";
+  if (aligned_on_still_surface) {
+    return surface_motion.Describe() + StringPrintf("; the model aligned to the still surface (%d of %d points)",
+                                                    still_surface_points, reconstruction_points);
+  }
+  if (surface_motion.moving_patches > 0) {
+    return surface_motion.Describe() +
+           StringPrintf("; too little still surface to align on (%d of %d points): aligned to all of it",
+                        still_surface_points, reconstruction_points);
+  }
+  return surface_motion.Describe();
+}
+
 std::string SessionStageOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
   if (!(max_room_placement_sigma_mm > 0)) return "max_room_placement_sigma_mm must be positive";
@@ -194,17 +208,7 @@ std::string SessionStageResult::Summary() const {
                         surface_offset_frames, 1000 * surface_offset_shift_m.norm());
   }
   out << RoomPlacementText() << "\n";
-  if (surface_motion.frames > 0) {
-    out << surface_motion.Describe();
-    if (aligned_on_still_surface) {
-      out << StringPrintf("; the model aligned to the still surface (%d of %d points)", still_surface_points,
-                          reconstruction_points);
-    } else if (surface_motion.moving_patches > 0) {
-      out << StringPrintf("; too little still surface to align on (%d of %d points): aligned to all of it",
-                          still_surface_points, reconstruction_points);
-    }
-    out << "\n";
-  }
+  if (surface_motion.frames > 0) out << SurfaceMotionText() << "\n";
   if (sticker_reading_distance_m > 0) {
     out << StringPrintf("stickers readable up to %.2f m from this camera (face-on)\n", sticker_reading_distance_m);
   }
@@ -820,10 +824,7 @@ void StoreSession(Database* database, const CaseFolder& folder, const SessionSta
     session.fraction = static_cast<int>(database->ListSessions(plan_id).size()) + 1;
     session.operator_name = options.op.Actor();
     session.notes = "session stage on " + folder.root.string() + "; " + result->RoomPlacementText();
-    if (result->surface_motion.frames > 0) {
-      session.notes += "; " + result->surface_motion.Describe() +
-                       (result->aligned_on_still_surface ? "; the model aligned to the still surface" : "");
-    }
+    if (const std::string motion = result->SurfaceMotionText(); !motion.empty()) session.notes += "; " + motion;
     for (const std::string& w : result->warnings) session.notes += "; warning: " + w;
     session.on_unapproved_plan = result->on_unapproved_plan;
     // The plan's approval as it is when the session opens (inside the

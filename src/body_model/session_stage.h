@@ -187,6 +187,9 @@ struct SessionStageResult {
   /// the tracking distance), with what to do.
   std::vector<std::string> warnings;
   std::string RoomPlacementText() const;
+  /// The surface motion and what the alignment made of it, for people;
+  /// empty when no frame measured it.
+  std::string SurfaceMotionText() const;
   int reconstruction_points = 0;
   /// Frames offered to the reconstruction and those fused (a frame whose
   /// GICP correction is refused is left out).

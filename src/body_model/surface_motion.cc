@@ -5,6 +5,7 @@
 #include <sstream>
 
 
+#include "geometry/cube_grid.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -39,12 +40,7 @@ std::string SurfaceMotionOptions::Validate() const {
   return out.str();
 }
 
-uint64_t SurfacePatchKey(const Eigen::Vector3d& p, double patch_m) {
-  const auto cell = [&](double v) {
-    return static_cast<uint64_t>(static_cast<int64_t>(std::floor(v / patch_m)) + (1 << 20)) & 0x1FFFFF;
-  };
-  return (cell(p.x()) << 42) | (cell(p.y()) << 21) | cell(p.z());
-}
+uint64_t SurfacePatchKey(const Eigen::Vector3d& p, double patch_m) { return CubeKey(p, patch_m); }
 
 bool SurfaceMotion::IsMoving(const Eigen::Vector3d& point_in_model) const {
   if (!measured) return false;
@@ -65,10 +61,7 @@ std::vector<Eigen::Vector3d> SurfaceMotion::MovingPatchCentres() const {
   }
   std::sort(keys.begin(), keys.end());
   std::vector<Eigen::Vector3d> centres;
-  const auto coordinate = [this](uint64_t key, int shift) {
-    return (static_cast<double>(static_cast<int64_t>((key >> shift) & 0x1FFFFF) - (1 << 20)) + 0.5) * patch_m;
-  };
-  for (const uint64_t key : keys) centres.emplace_back(coordinate(key, 42), coordinate(key, 21), coordinate(key, 0));
+  for (const uint64_t key : keys) centres.push_back(CubeCentre(key, patch_m));
   return centres;
 }
 

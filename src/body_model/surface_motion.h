@@ -94,7 +94,7 @@ struct SurfaceMotion {
   std::string Describe() const;
 };
 
-/// The patch key of a model-frame point (cubes of `patch_m`).
+/// The patch key of a model-frame point (cubes of `patch_m`: CubeKey).
 uint64_t SurfacePatchKey(const Eigen::Vector3d& point_in_model, double patch_m);
 
 /// Measures as in the file comment. `model_surface` (model frame) needs

@@ -11,6 +11,7 @@
 
 #include "store/sqlite_database.h"
 #include "util/check.h"
+#include "util/string_util.h"
 
 #ifndef ARPOS_VERSION
 #define ARPOS_VERSION "unknown"
@@ -120,18 +121,13 @@ std::string DescribeBreathing(const BodyMarkerMapRecord& map) {
   if (ids.empty() && map.moving_surface_patches.empty()) {
     return "no sticker or surface patch moved with the breathing (or the scan could not tell)";
   }
-  char text[160];
-  std::string out;
-  if (ids.empty()) {
-    out = "no sticker moved with the breathing";
-  } else {
-    std::snprintf(text, sizeof text, " moved with the breathing (%.1f-%.1f mm, 1 sigma along their normals)",
-                  1000 * lo, 1000 * hi);
-    out = (ids.find(',') == std::string::npos ? "sticker " : "stickers ") + ids + text;
-  }
-  std::snprintf(text, sizeof text, "; %zu surface patches of %.0f mm moved", map.moving_surface_patches.size(),
-                1000 * map.surface_patch_m);
-  return out + text;
+  const std::string stickers =
+      ids.empty() ? "no sticker moved with the breathing"
+                  : (ids.find(',') == std::string::npos ? "sticker " : "stickers ") + ids +
+                        StringPrintf(" moved with the breathing (%.1f-%.1f mm, 1 sigma along their normals)",
+                                     1000 * lo, 1000 * hi);
+  return stickers + StringPrintf("; %zu surface patches of %.0f mm moved", map.moving_surface_patches.size(),
+                                 1000 * map.surface_patch_m);
 }
 
 std::string VerificationLine(const AuditVerification& v) {

@@ -1,18 +1,18 @@
 #include "tracking/body_tracker.h"
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <deque>
 #include <limits>
-#include <set>
+#include <unordered_set>
 
 #include <Eigen/Dense>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
+#include "geometry/cube_grid.h"
 #include "geometry/so3.h"
 #include "registration/mesh_cloud.h"
 #include "tracking/sticker_terms.h"
@@ -341,17 +341,12 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
   m.model_points.reserve(surface.size());
   m.model_normals.reserve(surface.size());
   // The surface that moved during the scan (breathing) is left out of the
-  // depth term: cells of the patches' grid.
+  // depth term.
   const double patch = options_.moving_surface_patch_m;
-  const auto cell = [patch](const Eigen::Vector3d& p) {
-    return std::array<int64_t, 3>{static_cast<int64_t>(std::floor(p.x() / patch)),
-                                  static_cast<int64_t>(std::floor(p.y() / patch)),
-                                  static_cast<int64_t>(std::floor(p.z() / patch))};
-  };
-  std::set<std::array<int64_t, 3>> moving_cells;
-  for (const Eigen::Vector3d& c : options_.moving_surface_patches) moving_cells.insert(cell(c));
+  std::unordered_set<uint64_t> moving_cells;
+  for (const Eigen::Vector3d& c : options_.moving_surface_patches) moving_cells.insert(CubeKey(c, patch));
   for (size_t i = 0; i < surface.size(); ++i) {
-    if (!moving_cells.empty() && moving_cells.count(cell(surface.point3(i)))) continue;
+    if (!moving_cells.empty() && moving_cells.count(CubeKey(surface.point3(i), patch))) continue;
     m.model_points.push_back(surface.point3(i));
     m.model_normals.push_back(surface.normal3(i));
   }

@@ -106,15 +106,28 @@ Counts CountPatches(const SurfaceMotion& motion, const PointCloud& surface) {
   return c;
 }
 
+// The reference surface (finely sampled) and its tree, once.
+const PointCloud& Model() {
+  static const PointCloud model = FrontHalfCylinder(0.002);
+  return model;
+}
+const KdTree& ModelTree() {
+  static const KdTree tree(Model());
+  return tree;
+}
+
+// MakeScan, measured against the model at its true pose.
+SurfaceMotion Measure(double amplitude_m, int frames, uint32_t seed) {
+  const Scan scan = MakeScan(amplitude_m, frames, seed);
+  return MeasureSurfaceMotion(scan.frames, Model(), ModelTree(), Rigid3d::Identity());
+}
+
 TEST(SurfaceMotion, TheBreathingPartIsFoundAndTheStillPartsAreNot) {
-  const PointCloud model = FrontHalfCylinder(0.002);
-  const KdTree tree(model);
   for (const uint32_t seed : {1u, 2u, 3u}) {
-    const Scan scan = MakeScan(0.004, 20, seed);
-    const SurfaceMotion motion = MeasureSurfaceMotion(scan.frames, model, tree, Rigid3d::Identity());
+    const SurfaceMotion motion = Measure(0.004, 20, seed);
     ASSERT_TRUE(motion.measured) << motion.Describe();
     EXPECT_EQ(motion.frames, 20);
-    const Counts c = CountPatches(motion, model);
+    const Counts c = CountPatches(motion, Model());
     ASSERT_GT(c.moving_total, 5);
     ASSERT_GT(c.still_total, 20);
     EXPECT_GE(c.moving_flagged, 0.9 * c.moving_total) << "seed " << seed << ": " << motion.Describe();
@@ -127,10 +140,7 @@ TEST(SurfaceMotion, TheBreathingPartIsFoundAndTheStillPartsAreNot) {
 }
 
 TEST(SurfaceMotion, AStillSurfaceHasNoMovingPart) {
-  const PointCloud model = FrontHalfCylinder(0.002);
-  const KdTree tree(model);
-  const Scan scan = MakeScan(0, 20, 4);
-  const SurfaceMotion motion = MeasureSurfaceMotion(scan.frames, model, tree, Rigid3d::Identity());
+  const SurfaceMotion motion = Measure(0, 20, 4);
   ASSERT_TRUE(motion.measured);
   EXPECT_LE(motion.moving_patches, 0.03 * motion.patches) << motion.Describe();
   // Nothing is what the frames' own errors and noise give: well under a millimetre.
@@ -138,10 +148,7 @@ TEST(SurfaceMotion, AStillSurfaceHasNoMovingPart) {
 }
 
 TEST(SurfaceMotion, TooFewFramesTellNothing) {
-  const PointCloud model = FrontHalfCylinder(0.002);
-  const KdTree tree(model);
-  const Scan scan = MakeScan(0.004, 3, 5);
-  const SurfaceMotion motion = MeasureSurfaceMotion(scan.frames, model, tree, Rigid3d::Identity());
+  const SurfaceMotion motion = Measure(0.004, 3, 5);
   EXPECT_FALSE(motion.measured);
   EXPECT_EQ(motion.moving_patches, 0);
   EXPECT_FALSE(motion.IsMoving(Eigen::Vector3d(0, -kRadius, 0.1)));
