@@ -101,8 +101,40 @@ SensorProfile MakeSensorProfile(const std::string& name) {
     p.edge_dropout = 0.5;
     p.random_dropout = 0.002;
     p.projector_baseline_m = 0;
+  } else if (name == "d435") {
+    // Intel RealSense D435 class: active stereo depth (5 cm baseline)
+    // registered to 848x480 colour, with a calibration as a real unit has it:
+    // the principal point off the image centre and fx != fy (the other two
+    // profiles are centred and square, so this one checks that nothing
+    // assumes they are).
+    p.intrinsics.width = 848;
+    p.intrinsics.height = 480;
+    p.intrinsics.fx = 611.8;
+    p.intrinsics.fy = 610.9;
+    p.intrinsics.cx = 428.3;
+    p.intrinsics.cy = 246.6;
+    p.intrinsics.depth_scale = 1000;
+    p.blur_sigma_px = 0.8;
+    p.vignetting = 0.3;
+    p.read_noise = 1.2;
+    p.shot_noise_gain = 0.09;
+    p.exposure_time_s = 0.016;
+    // Stereo: sigma_z = z^2 * subpixel / (f b), 0.08 px / (612 px * 0.05 m).
+    p.depth_sigma_const_m = 0.0005;
+    p.depth_sigma_quad_per_m = 2.6e-3;
+    p.depth_correlated_fraction = 0.4;
+    p.depth_correlation_px = 10;
+    p.min_range_m = 0.3;
+    p.max_range_m = 6.0;
+    p.grazing_start_deg = 70;
+    p.grazing_end_deg = 84;
+    p.edge_relative_jump = 0.03;
+    p.edge_dropout = 0.6;
+    p.random_dropout = 0.006;
+    p.projector_baseline_m = 0.05;  // the left-right stereo pair's occlusion band
+    p.disparity_subpixel = 16;
   } else {
-    ARPOS_INPUT_ERROR("unknown camera profile '" << name << "' (known: xtion, l515)");
+    ARPOS_INPUT_ERROR("unknown camera profile '" << name << "' (known: xtion, l515, d435)");
   }
   return p;
 }

@@ -27,7 +27,7 @@
 namespace arpos::sim {
 
 struct SensorProfile {
-  std::string name;                ///< "xtion" or "l515"
+  std::string name;                ///< "xtion", "l515" or "d435"
   CameraIntrinsics intrinsics;
   int supersampling = 3;           ///< rasteriser samples per pixel axis
   // Colour.
@@ -56,7 +56,8 @@ struct SensorProfile {
   std::string Describe() const;  ///< one line for logs and simulation.yaml
 };
 
-/// "xtion" (640x480 structured light, depth_scale 1000) or "l515"
+/// "xtion" (640x480 structured light, depth_scale 1000), "d435" (848x480,
+/// active stereo, an off-centre principal point, depth_scale 1000) or "l515"
 /// (1280x720 colour, registered LiDAR depth, depth_scale 4000). Throws
 /// InputError for another name.
 SensorProfile MakeSensorProfile(const std::string& name);

@@ -87,7 +87,9 @@ SimulatedMarker ToSimulated(const MarkerTruth& m) {
 }  // namespace
 
 std::string SimulationOptions::Check() const {
-  if (profile != "xtion" && profile != "l515") return "profile: must be xtion or l515, got " + profile;
+  if (profile != "xtion" && profile != "l515" && profile != "d435") {
+    return "profile: must be xtion, l515 or d435, got " + profile;
+  }
   if (room_frames < 1 || body_scan_frames < 1 || tracking_frames < 1) {
     return "frames: every sequence needs at least 1 frame";
   }

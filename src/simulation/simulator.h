@@ -57,7 +57,7 @@ namespace arpos::sim {
 inline constexpr int kSimulatorVersion = 3;
 
 struct SimulationOptions {
-  std::string profile = "xtion";  ///< xtion | l515
+  std::string profile = "xtion";  ///< xtion | l515 | d435
   uint64_t seed = 1;
   bool hard = false;    ///< motion blur, lighting change, hand occluder, sticker falls off
   bool noise = true;    ///< false: exact renders (no blur, noise or dropouts)

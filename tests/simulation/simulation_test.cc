@@ -62,6 +62,17 @@ const Simulator& ExactSimulator() {
   return *simulator;
 }
 
+// The d435 profile: a principal point off the image centre and fx != fy.
+const Simulator& ExactD435Simulator() {
+  static const Simulator* simulator = [] {
+    SimulationOptions o = SmallOptions();
+    o.profile = "d435";
+    o.noise = false;
+    return new Simulator(o);
+  }();
+  return *simulator;
+}
+
 const Simulator& NoisySimulator() {
   static const Simulator* simulator = [] {
     SimulationOptions o = SmallOptions();
@@ -220,7 +231,10 @@ Rigid3d CloseViewOfOriginMarker(double roll_deg) {
 }
 
 TEST(Rendering, OriginMarkerDetectedAtTheProjectedCornersAndPnpGivesTheTruePose) {
-  const Simulator& sim = ExactSimulator();
+  // Both camera models: xtion (centred, square pixels) and d435 (neither).
+  for (const Simulator* simulator : {&ExactSimulator(), &ExactD435Simulator()}) {
+  const Simulator& sim = *simulator;
+  SCOPED_TRACE(sim.profile().name);
   const CameraIntrinsics& K = sim.profile().intrinsics;
   const MarkerTruth& origin = sim.world().room_markers.front();
   ASSERT_EQ(origin.id, 0);
@@ -266,7 +280,9 @@ TEST(Rendering, OriginMarkerDetectedAtTheProjectedCornersAndPnpGivesTheTruePose)
     const PoseError error = ComputePoseError(room_from_camera, room_from_camera_est);
     EXPECT_LT(error.translation_mm, 1.0) << "roll " << roll;
     EXPECT_LT(error.rotation_deg, 0.1) << "roll " << roll;
-    std::printf("origin marker, roll %.0f deg: corners %.3f px (OpenCV SUBPIX %.3f px), PnP %.3f mm %.4f deg\n", roll, worst_px, worst_subpix_px, error.translation_mm, error.rotation_deg);
+    std::printf("%s origin marker, roll %.0f deg: corners %.3f px (OpenCV SUBPIX %.3f px), PnP %.3f mm %.4f deg\n",
+                sim.profile().name.c_str(), roll, worst_px, worst_subpix_px, error.translation_mm, error.rotation_deg);
+  }
   }
 }
 
@@ -683,6 +699,25 @@ TEST(Case, L515CasePassesCheckCase) {
   const CaseConfig config = LoadCaseConfig(root / "case.yaml");
   EXPECT_EQ(config.camera.width, 1280);
   EXPECT_EQ(config.camera.height, 720);
+}
+
+TEST(Case, D435CasePassesCheckCaseWithItsOffCentreCalibration) {
+  TempDir dir("arpos_sim_d435");
+  SimulationOptions o = SmallOptions();
+  o.profile = "d435";
+  o.room_frames = 2;
+  o.body_scan_frames = 2;
+  o.tracking_frames = 2;
+  const fs::path root = dir.path() / "case";
+  Simulator(o).WriteCase(root);
+  ExpectValidCase(root, o);
+  const CameraIntrinsics& K = LoadCaseConfig(root / "case.yaml").camera;
+  EXPECT_EQ(K.width, 848);
+  EXPECT_EQ(K.height, 480);
+  EXPECT_NE(K.fx, K.fy);
+  EXPECT_GT(std::abs(K.cx - (K.width - 1) / 2.0), 3.0);
+  EXPECT_GT(std::abs(K.cy - (K.height - 1) / 2.0), 3.0);
+  EXPECT_EQ(K.depth_scale, 1000);
 }
 
 TEST(Case, HardCasePassesCheckCaseAndRecordsItsEffects) {
