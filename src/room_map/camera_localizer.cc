@@ -72,6 +72,9 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (!(weak_tracking_fraction >= 0 && weak_tracking_fraction <= 1))
     out << "weak_tracking_fraction must be in [0, 1]";
   else if (relocalisation_max_landmarks < 1) out << "relocalisation_max_landmarks must be at least 1";
+  else if (room_plane_min_markers < 2 || !(room_plane_support_m > 0) || !(room_plane_gate_m > 0) ||
+           room_plane_step_px < 1 || room_plane_min_samples < 1 || !(room_plane_max_effective >= 1))
+    out << "room plane settings must be positive (at least 2 markers a plane)";
   else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
@@ -136,6 +139,17 @@ struct CameraLocalizer::Impl {
   // A caller's start for the next relocalisation (SuggestSearchStart).
   std::optional<Rigid3d> search_start;
 
+  // The map's planes: markers lying in one plane (room frame).
+  struct RoomPlane {
+    Eigen::Vector3d normal;  // unit
+    double offset = 0;       // normal . x = offset on the plane
+    std::vector<Eigen::Vector3d> marker_centres;
+  };
+  std::vector<RoomPlane> planes;
+  // Ideal rays of the plane sample grid, (x, y) of (x, y, 1), and their pixels.
+  std::vector<Eigen::Vector2d> plane_grid_ray;
+  std::vector<cv::Point> plane_grid_px;
+
   Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
       : map(m), K(k), options(o), extractor(o.keypoints) {
     distortion = K.HasDistortion();
@@ -143,6 +157,154 @@ struct CameraLocalizer::Impl {
     MarkerDetectorOptions d = options.detector;
     d.intrinsics = distortion ? std::optional<CameraIntrinsics>(K) : std::nullopt;
     detector = std::make_unique<MarkerDetector>(d);
+    if (options.use_room_planes) FindRoomPlanes();
+  }
+
+  // Groups the map's markers by plane (normals within 3 deg, centres within
+  // 2 cm of the seed marker's plane), largest groups first, each marker in
+  // one group; a plane fitted to the corners of each group of at least
+  // room_plane_min_markers markers.
+  void FindRoomPlanes() {
+    const size_t n = map.markers.size();
+    std::vector<bool> used(n, false);
+    const double cos_tol = std::cos(RadFromDeg(3.0));
+    while (true) {
+      std::vector<size_t> best;
+      for (size_t i = 0; i < n; ++i) {
+        if (used[i]) continue;
+        const Eigen::Vector3d ni = map.markers[i].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
+        const double di = ni.dot(map.markers[i].room_from_marker.translation);
+        std::vector<size_t> group;
+        for (size_t j = 0; j < n; ++j) {
+          if (used[j]) continue;
+          const Eigen::Vector3d nj = map.markers[j].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
+          if (ni.dot(nj) < cos_tol) continue;
+          if (std::abs(ni.dot(map.markers[j].room_from_marker.translation) - di) > 0.02) continue;
+          group.push_back(j);
+        }
+        if (group.size() > best.size()) best = group;
+      }
+      if (static_cast<int>(best.size()) < options.room_plane_min_markers) break;
+      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+      int count = 0;
+      for (size_t j : best) {
+        for (const auto& c : map.markers[j].corners_in_room) mean += c, ++count;
+      }
+      mean /= count;
+      Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+      for (size_t j : best) {
+        for (const auto& c : map.markers[j].corners_in_room) scatter += (c - mean) * (c - mean).transpose();
+      }
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
+      RoomPlane plane;
+      plane.normal = eig.eigenvectors().col(0).normalized();
+      const Eigen::Vector3d n0 = map.markers[best.front()].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
+      if (plane.normal.dot(n0) < 0) plane.normal = -plane.normal;
+      plane.offset = plane.normal.dot(mean);
+      for (size_t j : best) {
+        used[j] = true;
+        plane.marker_centres.push_back(map.markers[j].room_from_marker.translation);
+      }
+      planes.push_back(std::move(plane));
+    }
+    if (planes.empty()) return;
+    // About 80 samples across the image whatever its size (the samples of
+    // a plane count as room_plane_max_effective at most anyway).
+    const int step = std::max(options.room_plane_step_px, K.width / 80);
+    std::vector<cv::Point2d> px, ideal;
+    for (int v = step / 2; v < K.height; v += step) {
+      for (int u = step / 2; u < K.width; u += step) {
+        px.emplace_back(u, v);
+        plane_grid_px.emplace_back(u, v);
+      }
+    }
+    if (distortion) {
+      cv::undistortPoints(px, ideal, K.CvK(), K.CvDistortion());
+      for (const auto& p : ideal) plane_grid_ray.emplace_back(p.x, p.y);
+    } else {
+      for (const auto& p : px) plane_grid_ray.emplace_back((p.x - K.cx) / K.fx, (p.y - K.cy) / K.fy);
+    }
+  }
+
+  // Depth pixels on the map's planes at `camera_from_room` (the first
+  // refinement's pose), added to corr as plane-depth terms.
+  void AddRoomPlaneDepths(const Rigid3d& camera_from_room) {
+    if (planes.empty() || depth_image == nullptr || depth_image->empty()) return;
+    const Rigid3d room_from_camera = camera_from_room.Inverse();
+    const double scale = depth_scale > 0 ? depth_scale : K.depth_scale;
+    struct Sample {
+      size_t ray;
+      double z;
+      Eigen::Vector3d x;  // camera frame
+    };
+    std::vector<std::vector<Sample>> on(planes.size());
+    const double support2 = options.room_plane_support_m * options.room_plane_support_m;
+    for (size_t i = 0; i < plane_grid_ray.size(); ++i) {
+      const uint16_t raw = depth_image->at<uint16_t>(plane_grid_px[i]);
+      if (raw == 0) continue;
+      const double z = raw / scale;
+      const Eigen::Vector3d xc(plane_grid_ray[i].x() * z, plane_grid_ray[i].y() * z, z);
+      const Eigen::Vector3d x = room_from_camera * xc;
+      const double gate = std::max(options.room_plane_gate_m, 3 * DepthSigma(z));
+      for (size_t p = 0; p < planes.size(); ++p) {
+        if (std::abs(planes[p].normal.dot(x) - planes[p].offset) > gate) continue;
+        bool near = false;
+        for (const auto& c : planes[p].marker_centres) near |= (x - c).squaredNorm() < support2;
+        if (near) {
+          on[p].push_back({i, z, xc});
+          break;
+        }
+      }
+    }
+    for (size_t p = 0; p < planes.size(); ++p) {
+      std::vector<Sample>& cand = on[p];
+      if (static_cast<int>(cand.size()) < options.room_plane_min_samples) continue;
+      // The plane as this frame's depth shows it (camera frame), fitted to
+      // the candidates with those beyond 2.5 sigma (across the plane) left
+      // out, three times: the gate above also lets in the foot of what
+      // stands on the plane (a wall, the couch base), whose pixels would
+      // tilt it; only the fitted plane's inliers are kept.
+      Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
+      double d = n.dot(camera_from_room * (planes[p].normal * planes[p].offset));
+      std::vector<bool> in(cand.size(), true);
+      for (int pass = 0; pass < 3; ++pass) {
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        double wsum = 0;
+        for (size_t k = 0; k < cand.size(); ++k) {
+          const double across = DepthSigma(cand[k].z) * std::abs(n.dot(cand[k].x.normalized()));
+          in[k] = std::abs(n.dot(cand[k].x) - d) < 2.5 * std::max(across, 1e-3);
+          if (!in[k]) continue;
+          const double w = 1.0 / (across * across + 1e-6);
+          mean += w * cand[k].x;
+          wsum += w;
+        }
+        if (wsum <= 0) break;
+        mean /= wsum;
+        Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+        for (size_t k = 0; k < cand.size(); ++k) {
+          if (!in[k]) continue;
+          const double across = DepthSigma(cand[k].z) * std::abs(n.dot(cand[k].x.normalized()));
+          scatter += (cand[k].x - mean) * (cand[k].x - mean).transpose() / (across * across + 1e-6);
+        }
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
+        Eigen::Vector3d fitted = eig.eigenvectors().col(0).normalized();
+        if (fitted.dot(n) < 0) fitted = -fitted;
+        if (fitted.dot(n) < std::cos(RadFromDeg(5.0))) break;  // not the mapped plane
+        n = fitted;
+        d = n.dot(mean);
+      }
+      std::vector<const Sample*> kept;
+      for (size_t k = 0; k < cand.size(); ++k) {
+        if (in[k]) kept.push_back(&cand[k]);
+      }
+      const double count = static_cast<double>(kept.size());
+      if (count < options.room_plane_min_samples) continue;
+      const double share = std::sqrt(std::max(1.0, count / options.room_plane_max_effective));
+      const Eigen::Vector3d point = planes[p].normal * planes[p].offset;
+      for (const Sample* s : kept) {
+        corr.AddPlaneDepth(point, planes[p].normal, plane_grid_ray[s->ray], s->z, DepthSigma(s->z) * share);
+      }
+    }
   }
 
   double DepthSigma(double z) const {
@@ -172,6 +334,7 @@ struct CameraLocalizer::Impl {
 
   // Depth samples for the markers that have none yet (marker_depth parallel to markers).
   const cv::Mat* depth_image = nullptr;
+  double depth_scale = 0;  // this frame's depth units per metre (0: the camera's)
   void SampleMarkerDepths() {
     while (marker_depth.size() < markers.size()) {
       const MarkerObservation& obs = markers[marker_depth.size()];
@@ -449,10 +612,12 @@ struct CameraLocalizer::Impl {
     BuildCorrespondences();
     PoseRefinementResult r = RefineCameraPose(corr, K, initial, options.refiner, prior);
     Lap(mark, refinement_ms);
-    if (options.use_keypoints && !map.landmarks_in_room.empty()) {
-      SearchByProjection(r.camera_from_room, options.refined_search_radius_px);
+    const bool keypoints = options.use_keypoints && !map.landmarks_in_room.empty();
+    if (keypoints || !planes.empty()) {
+      if (keypoints) SearchByProjection(r.camera_from_room, options.refined_search_radius_px);
       Lap(mark, matching_ms);
       BuildCorrespondences();
+      if (r.converged) AddRoomPlaneDepths(r.camera_from_room);
       r = RefineCameraPose(corr, K, r.camera_from_room, options.refiner, prior);
       Lap(mark, refinement_ms);
     }
@@ -603,6 +768,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     }
   }
   m.depth_image = &frame.depth;
+  m.depth_scale = frame.depth_scale;
   m.SampleMarkerDepths();
   Lap(&mark, &tm.detection_ms);
   if (keypoints_job.valid()) {

@@ -88,6 +88,21 @@ struct CameraLocalizerOptions {
   int marker_depth_max_effective = 8;
   double marker_depth_sigma_const_m = 0.001;
   double marker_depth_sigma_quad_per_m = 0.0015;
+  /// The room's planes in depth: markers lying in one plane (the floor, a
+  /// wall; at least room_plane_min_markers of them) make a plane of the map,
+  /// and depth pixels that the first refinement puts on it (within
+  /// max(room_plane_gate_m, 3 sigma(z)), within room_plane_support_m of one
+  /// of its markers) constrain the camera's height and tilt against it.
+  /// Sampled every room_plane_step_px pixels (at least width / 80); one plane's samples count as
+  /// at most room_plane_max_effective independent ones (depth noise is
+  /// partly smooth over the image).
+  bool use_room_planes = true;
+  int room_plane_min_markers = 2;
+  double room_plane_support_m = 2.0;
+  double room_plane_gate_m = 0.03;
+  int room_plane_step_px = 8;
+  int room_plane_min_samples = 40;
+  double room_plane_max_effective = 25;
   /// Tracking search: radius around the predicted pixel, descriptor distance,
   /// and the best/second-best ratio for a match.
   double search_radius_px = 15;

@@ -12,6 +12,7 @@
 #include <optional>
 
 #include "geometry/pose_error.h"
+#include "geometry/so3.h"
 #include "planning/planning_test_util.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
@@ -69,6 +70,55 @@ TEST(Localizer, TrackingFramesWithinTolerance) {
   }
   EXPECT_LT(sum_mm / ok, 3.0);
   EXPECT_LT(sum_deg / ok, 0.15);
+}
+
+// The floor in depth: markers lying on the floor make a plane of the map,
+// and the depth pixels on it hold the camera's height and tilt when the
+// keypoints alone leave them weak (markers not used, 100 landmarks). Both
+// runs are the same but for the planes.
+TEST(Localizer, TheFloorsDepthHoldsTheCamerasHeightAndTiltOnKeypointOnlyFrames) {
+  const auto& c = GetSmallCase();
+  const Sequence room = Sequence::Open(c.folder.room_dir);
+  RoomMapBuildOptions build = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
+  build.max_landmarks = 100;
+  build.max_localization_landmarks = 0;
+  const RoomMap map = BuildRoomMap(room, c.folder.config, build).map;
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  struct Errors {
+    int ok = 0;
+    double mean_mm = 0, vertical_mm = 0, tilt_deg = 0;
+  };
+  auto localise = [&](bool planes) {
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+    options.use_markers = false;
+    options.use_room_planes = planes;
+    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    Errors e;
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+      if (!r.ok) continue;
+      e.mean_mm += ComputePoseError(gt[i].room_from_x, r.room_from_camera).translation_mm;
+      // The room's z is the floor's normal (the origin marker lies on the floor).
+      e.vertical_mm += 1000 * std::abs(r.room_from_camera.translation.z() - gt[i].room_from_x.translation.z());
+      const Eigen::Vector3d up_est = r.room_from_camera.rotation.inverse() * Eigen::Vector3d::UnitZ();
+      const Eigen::Vector3d up_true = gt[i].room_from_x.rotation.inverse() * Eigen::Vector3d::UnitZ();
+      e.tilt_deg += DegFromRad(std::acos(std::clamp(up_est.dot(up_true), -1.0, 1.0)));
+      ++e.ok;
+    }
+    if (e.ok) e.mean_mm /= e.ok, e.vertical_mm /= e.ok, e.tilt_deg /= e.ok;
+    return e;
+  };
+  const Errors without = localise(false), with = localise(true);
+  std::printf("keypoint-only, 100 landmarks: without planes %d frames, %.2f mm (vertical %.2f mm, tilt %.3f deg); "
+              "with the floor %d frames, %.2f mm (vertical %.2f mm, tilt %.3f deg)\n",
+              without.ok, without.mean_mm, without.vertical_mm, without.tilt_deg, with.ok, with.mean_mm,
+              with.vertical_mm, with.tilt_deg);
+  EXPECT_GE(with.ok, without.ok);
+  EXPECT_LT(with.vertical_mm, 0.7 * without.vertical_mm);
+  EXPECT_LT(with.tilt_deg, 0.7 * without.tilt_deg);
+  EXPECT_LT(with.mean_mm, without.mean_mm);
 }
 
 // Keypoints alone can agree on a wrong place (repeated texture); a

@@ -230,6 +230,7 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("RELOC_SIGMA_M")) options.max_relocalisation_position_sigma_m = std::atof(v);
     if (const char* v = std::getenv("MAX_SIGMA_M")) options.max_position_sigma_m = std::atof(v);
     if (const char* v = std::getenv("MAX_EDGE_PX")) options.detector.edge.max_pixels_per_edge = std::atoi(v);
+    if (std::getenv("NO_PLANES")) options.use_room_planes = false;
     if (const char* v = std::getenv("BAND_PX")) options.detector.edge.band_half_width_px = std::atof(v);
     if (const char* v = std::getenv("ACCEL")) options.motion_accel_m_s2 = std::atof(v);
     if (const char* v = std::getenv("ANG_ACCEL")) options.motion_angular_accel_rad_s2 = std::atof(v);
@@ -260,6 +261,30 @@ int main(int argc, char** argv) {
       LocalizationTimings sum_t;
       for (size_t i = 0; i < seq.size(); ++i) {
         const RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
+        if (std::getenv("FLOOR_CHECK") && seq.CameraGroundTruth()) {
+          // The floor (room z = 0) as the depth shows it from the true camera.
+          const CameraIntrinsics& K = folder.config.camera;
+          for (const auto& g : *seq.CameraGroundTruth()) {
+            if (std::abs(g.timestamp_s - frame.timestamp_s) > 1e-4) continue;
+            double n = 0, sz = 0, su = 0, suu = 0, suz = 0, sdz = 0;
+            for (int v = 4; v < K.height; v += 8) {
+              for (int u = 4; u < K.width; u += 8) {
+                const uint16_t raw = frame.depth.at<uint16_t>(v, u);
+                if (!raw) continue;
+                const double z = raw / K.depth_scale;
+                const Eigen::Vector3d x = g.room_from_x * Eigen::Vector3d((u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z);
+                if (std::abs(x.z()) > 0.05) continue;
+                const double uu = (u - K.cx) / K.width;
+                n += 1, sz += x.z(), su += uu, suu += uu * uu, suz += uu * x.z(), sdz += z;
+              }
+            }
+            if (n > 10) {
+              const double slope = (suz - su * sz / n) / (suu - su * su / n);
+              std::printf("    floor f%03zu n %4.0f mean z %+.2f mm slope across the image %+.2f mm, depth %.2f m\n", i, n,
+                          1000 * sz / n, 1000 * slope, sdz / n);
+            }
+          }
+        }
         if (std::getenv("TRUTH_START")) {
           // Diagnostic: every frame relocalised from its true pose (what the
           // data alone says near the truth: a wrong pose here is the map's or
