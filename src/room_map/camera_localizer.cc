@@ -73,7 +73,8 @@ std::string CameraLocalizerOptions::Validate() const {
     out << "weak_tracking_fraction must be in [0, 1]";
   else if (relocalisation_max_landmarks < 1) out << "relocalisation_max_landmarks must be at least 1";
   else if (room_plane_min_markers < 2 || !(room_plane_support_m > 0) || !(room_plane_gate_m > 0) ||
-           room_plane_step_px < 1 || room_plane_min_samples < 1 || !(room_plane_max_effective >= 1))
+           room_plane_step_px < 1 || room_plane_min_samples < 1 || !(room_plane_max_effective >= 1) ||
+           !(room_plane_min_spread_m >= 0))
     out << "room plane settings must be positive (at least 2 markers a plane)";
   else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
@@ -196,15 +197,16 @@ struct CameraLocalizer::Impl {
         for (const auto& c : map.markers[j].corners_in_room) scatter += (c - mean) * (c - mean).transpose();
       }
       const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
+      for (size_t j : best) used[j] = true;
+      // Markers in a row (or two side by side) leave the plane's tilt across
+      // the row to their own width: such a group is no plane to lean on.
+      if (std::sqrt(std::max(0.0, eig.eigenvalues()(1)) / count) < options.room_plane_min_spread_m) continue;
       RoomPlane plane;
       plane.normal = eig.eigenvectors().col(0).normalized();
       const Eigen::Vector3d n0 = map.markers[best.front()].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
       if (plane.normal.dot(n0) < 0) plane.normal = -plane.normal;
       plane.offset = plane.normal.dot(mean);
-      for (size_t j : best) {
-        used[j] = true;
-        plane.marker_centres.push_back(map.markers[j].room_from_marker.translation);
-      }
+      for (size_t j : best) plane.marker_centres.push_back(map.markers[j].room_from_marker.translation);
       planes.push_back(std::move(plane));
     }
     if (planes.empty()) return;

@@ -98,6 +98,10 @@ struct CameraLocalizerOptions {
   /// partly smooth over the image).
   bool use_room_planes = true;
   int room_plane_min_markers = 2;
+  /// ... spread over the plane in both directions: RMS of their corners
+  /// along the plane's narrower extent at least this (a row of markers is
+  /// left out).
+  double room_plane_min_spread_m = 0.2;
   double room_plane_support_m = 2.0;
   double room_plane_gate_m = 0.03;
   int room_plane_step_px = 8;
