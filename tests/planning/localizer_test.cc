@@ -45,6 +45,15 @@ CommandResult RunArpos(const std::string& arguments) {
   return r;
 }
 
+// The small case's map with only 100 landmarks in the adjustment and none
+// placed after it: keypoints alone leave such a map's cameras weak.
+RoomMapBuildOptions HundredLandmarks(const CaseFolder& folder) {
+  RoomMapBuildOptions build = MakeRoomMapBuildOptions(folder, RoomMapStageOptions());
+  build.max_landmarks = 100;
+  build.max_localization_landmarks = 0;
+  return build;
+}
+
 TEST(Localizer, TrackingFramesWithinTolerance) {
   const auto& c = GetSmallCase();
   const RoomMap& map = GetSmallCaseMap().map;
@@ -79,10 +88,7 @@ TEST(Localizer, TrackingFramesWithinTolerance) {
 TEST(Localizer, TheFloorsDepthHoldsTheCamerasHeightAndTiltOnKeypointOnlyFrames) {
   const auto& c = GetSmallCase();
   const Sequence room = Sequence::Open(c.folder.room_dir);
-  RoomMapBuildOptions build = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
-  build.max_landmarks = 100;
-  build.max_localization_landmarks = 0;
-  const RoomMap map = BuildRoomMap(room, c.folder.config, build).map;
+  const RoomMap map = BuildRoomMap(room, c.folder.config, HundredLandmarks(c.folder)).map;
   const auto& [name, dir] = c.folder.tracking.at(0);
   const Sequence seq = Sequence::Open(dir);
   const auto gt = *seq.CameraGroundTruth();
@@ -131,9 +137,7 @@ TEST(Localizer, TheFloorsDepthHoldsTheCamerasHeightAndTiltOnKeypointOnlyFrames) 
 TEST(Localizer, LandmarksPlacedAfterTheAdjustmentHelpKeypointOnlyFrames) {
   const auto& c = GetSmallCase();
   const Sequence room = Sequence::Open(c.folder.room_dir);
-  RoomMapBuildOptions build = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
-  build.max_landmarks = 100;
-  build.max_localization_landmarks = 0;
+  RoomMapBuildOptions build = HundredLandmarks(c.folder);
   const RoomMapBuildResult few = BuildRoomMap(room, c.folder.config, build);
   build.max_localization_landmarks = 12000;
   const RoomMapBuildResult more = BuildRoomMap(room, c.folder.config, build);

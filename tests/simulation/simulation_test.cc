@@ -686,32 +686,28 @@ TEST(Case, XtionCasePassesCheckCase) {
   EXPECT_TRUE(gt[2].room_from_x.IsApprox(frame.room_from_camera, 1e-8, 1e-8));
 }
 
-TEST(Case, L515CasePassesCheckCase) {
-  TempDir dir("arpos_sim_l515");
+// A two-frame case of `profile` passes check-case; its camera as case.yaml has it.
+CameraIntrinsics SmallProfileCaseCamera(const std::string& profile) {
+  TempDir dir("arpos_sim_" + profile);
   SimulationOptions o = SmallOptions();
-  o.profile = "l515";
+  o.profile = profile;
   o.room_frames = 2;
   o.body_scan_frames = 2;
   o.tracking_frames = 2;
   const fs::path root = dir.path() / "case";
   Simulator(o).WriteCase(root);
   ExpectValidCase(root, o);
-  const CaseConfig config = LoadCaseConfig(root / "case.yaml");
-  EXPECT_EQ(config.camera.width, 1280);
-  EXPECT_EQ(config.camera.height, 720);
+  return LoadCaseConfig(root / "case.yaml").camera;
+}
+
+TEST(Case, L515CasePassesCheckCase) {
+  const CameraIntrinsics K = SmallProfileCaseCamera("l515");
+  EXPECT_EQ(K.width, 1280);
+  EXPECT_EQ(K.height, 720);
 }
 
 TEST(Case, D435CasePassesCheckCaseWithItsOffCentreCalibration) {
-  TempDir dir("arpos_sim_d435");
-  SimulationOptions o = SmallOptions();
-  o.profile = "d435";
-  o.room_frames = 2;
-  o.body_scan_frames = 2;
-  o.tracking_frames = 2;
-  const fs::path root = dir.path() / "case";
-  Simulator(o).WriteCase(root);
-  ExpectValidCase(root, o);
-  const CameraIntrinsics& K = LoadCaseConfig(root / "case.yaml").camera;
+  const CameraIntrinsics K = SmallProfileCaseCamera("d435");
   EXPECT_EQ(K.width, 848);
   EXPECT_EQ(K.height, 480);
   EXPECT_NE(K.fx, K.fy);
