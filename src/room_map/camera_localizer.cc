@@ -35,6 +35,29 @@ void Lap(double* mark, double* bucket) {
   *mark = now;
 }
 
+// The plane through weighted points: its weighted centroid and the weighted
+// scatter's eigen decomposition (ascending: column 0 is the normal, up to
+// sign; eigenvalue 1 the squared spread along its narrower extent).
+struct WeightedPlane {
+  Eigen::Vector3d centroid;
+  Eigen::Vector3d normal;
+  Eigen::Vector3d spread2;  // eigenvalues of the weighted covariance
+};
+std::optional<WeightedPlane> FitWeightedPlane(const std::vector<Eigen::Vector3d>& points,
+                                              const std::vector<double>& weights) {
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  double wsum = 0;
+  for (size_t i = 0; i < points.size(); ++i) centroid += weights[i] * points[i], wsum += weights[i];
+  if (!(wsum > 0)) return std::nullopt;
+  centroid /= wsum;
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (size_t i = 0; i < points.size(); ++i) {
+    scatter += weights[i] * (points[i] - centroid) * (points[i] - centroid).transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter / wsum);
+  return WeightedPlane{centroid, eig.eigenvectors().col(0).normalized(), eig.eigenvalues()};
+}
+
 }  // namespace
 
 const char* LocalizationStatusName(LocalizationStatus status) {
@@ -186,26 +209,20 @@ struct CameraLocalizer::Impl {
         if (group.size() > best.size()) best = group;
       }
       if (static_cast<int>(best.size()) < options.room_plane_min_markers) break;
-      Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-      int count = 0;
+      std::vector<Eigen::Vector3d> corners;
       for (size_t j : best) {
-        for (const auto& c : map.markers[j].corners_in_room) mean += c, ++count;
+        used[j] = true;
+        corners.insert(corners.end(), map.markers[j].corners_in_room.begin(), map.markers[j].corners_in_room.end());
       }
-      mean /= count;
-      Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-      for (size_t j : best) {
-        for (const auto& c : map.markers[j].corners_in_room) scatter += (c - mean) * (c - mean).transpose();
-      }
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
-      for (size_t j : best) used[j] = true;
+      const WeightedPlane fit = *FitWeightedPlane(corners, std::vector<double>(corners.size(), 1.0));
       // Markers in a row (or two side by side) leave the plane's tilt across
       // the row to their own width: such a group is no plane to lean on.
-      if (std::sqrt(std::max(0.0, eig.eigenvalues()(1)) / count) < options.room_plane_min_spread_m) continue;
+      if (std::sqrt(std::max(0.0, fit.spread2(1))) < options.room_plane_min_spread_m) continue;
       RoomPlane plane;
-      plane.normal = eig.eigenvectors().col(0).normalized();
+      plane.normal = fit.normal;
       const Eigen::Vector3d n0 = map.markers[best.front()].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
       if (plane.normal.dot(n0) < 0) plane.normal = -plane.normal;
-      plane.offset = plane.normal.dot(mean);
+      plane.offset = plane.normal.dot(fit.centroid);
       for (size_t j : best) plane.marker_centres.push_back(map.markers[j].room_from_marker.translation);
       planes.push_back(std::move(plane));
     }
@@ -233,18 +250,17 @@ struct CameraLocalizer::Impl {
   void AddRoomPlaneDepths(const Rigid3d& camera_from_room) {
     if (planes.empty() || depth_image == nullptr || depth_image->empty()) return;
     const Rigid3d room_from_camera = camera_from_room.Inverse();
-    const double scale = depth_scale > 0 ? depth_scale : K.depth_scale;
     struct Sample {
       size_t ray;
       double z;
-      Eigen::Vector3d x;  // camera frame
     };
     std::vector<std::vector<Sample>> on(planes.size());
+    std::vector<std::vector<Eigen::Vector3d>> on_points(planes.size());  // parallel, camera frame
     const double support2 = options.room_plane_support_m * options.room_plane_support_m;
     for (size_t i = 0; i < plane_grid_ray.size(); ++i) {
       const uint16_t raw = depth_image->at<uint16_t>(plane_grid_px[i]);
       if (raw == 0) continue;
-      const double z = raw / scale;
+      const double z = raw / K.depth_scale;  // as the marker depth samples read it
       const Eigen::Vector3d xc(plane_grid_ray[i].x() * z, plane_grid_ray[i].y() * z, z);
       const Eigen::Vector3d x = room_from_camera * xc;
       const double gate = std::max(options.room_plane_gate_m, 3 * DepthSigma(z));
@@ -253,13 +269,15 @@ struct CameraLocalizer::Impl {
         bool near = false;
         for (const auto& c : planes[p].marker_centres) near |= (x - c).squaredNorm() < support2;
         if (near) {
-          on[p].push_back({i, z, xc});
+          on[p].push_back({i, z});
+          on_points[p].push_back(xc);
           break;
         }
       }
     }
     for (size_t p = 0; p < planes.size(); ++p) {
-      std::vector<Sample>& cand = on[p];
+      const std::vector<Sample>& cand = on[p];
+      const std::vector<Eigen::Vector3d>& points = on_points[p];
       if (static_cast<int>(cand.size()) < options.room_plane_min_samples) continue;
       // The plane as this frame's depth shows it (camera frame), fitted to
       // the candidates with those beyond 2.5 sigma (across the plane) left
@@ -268,36 +286,24 @@ struct CameraLocalizer::Impl {
       // tilt it; only the fitted plane's inliers are kept.
       Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
       double d = n.dot(camera_from_room * (planes[p].normal * planes[p].offset));
-      std::vector<bool> in(cand.size(), true);
+      std::vector<double> weight(cand.size());
       for (int pass = 0; pass < 3; ++pass) {
-        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-        double wsum = 0;
         for (size_t k = 0; k < cand.size(); ++k) {
-          const double across = DepthSigma(cand[k].z) * std::abs(n.dot(cand[k].x.normalized()));
-          in[k] = std::abs(n.dot(cand[k].x) - d) < 2.5 * std::max(across, 1e-3);
-          if (!in[k]) continue;
-          const double w = 1.0 / (across * across + 1e-6);
-          mean += w * cand[k].x;
-          wsum += w;
+          const double across = DepthSigma(cand[k].z) * std::abs(n.dot(points[k].normalized()));
+          const bool in = std::abs(n.dot(points[k]) - d) < 2.5 * std::max(across, 1e-3);
+          weight[k] = in ? 1.0 / (across * across + 1e-6) : 0.0;
         }
-        if (wsum <= 0) break;
-        mean /= wsum;
-        Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-        for (size_t k = 0; k < cand.size(); ++k) {
-          if (!in[k]) continue;
-          const double across = DepthSigma(cand[k].z) * std::abs(n.dot(cand[k].x.normalized()));
-          scatter += (cand[k].x - mean) * (cand[k].x - mean).transpose() / (across * across + 1e-6);
-        }
-        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter);
-        Eigen::Vector3d fitted = eig.eigenvectors().col(0).normalized();
+        const std::optional<WeightedPlane> fit = FitWeightedPlane(points, weight);
+        if (!fit) break;
+        Eigen::Vector3d fitted = fit->normal;
         if (fitted.dot(n) < 0) fitted = -fitted;
         if (fitted.dot(n) < std::cos(RadFromDeg(5.0))) break;  // not the mapped plane
         n = fitted;
-        d = n.dot(mean);
+        d = n.dot(fit->centroid);
       }
       std::vector<const Sample*> kept;
       for (size_t k = 0; k < cand.size(); ++k) {
-        if (in[k]) kept.push_back(&cand[k]);
+        if (weight[k] > 0) kept.push_back(&cand[k]);
       }
       const double count = static_cast<double>(kept.size());
       if (count < options.room_plane_min_samples) continue;
@@ -336,7 +342,6 @@ struct CameraLocalizer::Impl {
 
   // Depth samples for the markers that have none yet (marker_depth parallel to markers).
   const cv::Mat* depth_image = nullptr;
-  double depth_scale = 0;  // this frame's depth units per metre (0: the camera's)
   void SampleMarkerDepths() {
     while (marker_depth.size() < markers.size()) {
       const MarkerObservation& obs = markers[marker_depth.size()];
@@ -770,7 +775,6 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     }
   }
   m.depth_image = &frame.depth;
-  m.depth_scale = frame.depth_scale;
   m.SampleMarkerDepths();
   Lap(&mark, &tm.detection_ms);
   if (keypoints_job.valid()) {
