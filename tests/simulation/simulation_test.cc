@@ -233,56 +233,56 @@ Rigid3d CloseViewOfOriginMarker(double roll_deg) {
 TEST(Rendering, OriginMarkerDetectedAtTheProjectedCornersAndPnpGivesTheTruePose) {
   // Both camera models: xtion (centred, square pixels) and d435 (neither).
   for (const Simulator* simulator : {&ExactSimulator(), &ExactD435Simulator()}) {
-  const Simulator& sim = *simulator;
-  SCOPED_TRACE(sim.profile().name);
-  const CameraIntrinsics& K = sim.profile().intrinsics;
-  const MarkerTruth& origin = sim.world().room_markers.front();
-  ASSERT_EQ(origin.id, 0);
-  EXPECT_TRUE(origin.parent_from_marker.IsApprox(Rigid3d::Identity(), 0, 0));
-  for (double roll : {0.0, 23.0}) {
-    const Rigid3d room_from_camera = CloseViewOfOriginMarker(roll);
-    const SimulatedFrame frame = sim.RenderView(room_from_camera, std::nullopt, /*noise=*/false);
-    cv::Mat gray;
-    cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
-    std::vector<std::vector<cv::Point2f>> corners;
-    std::vector<int> ids;
-    cv::aruco::detectMarkers(gray, Dictionary(), corners, ids, SubpixParams());
-    const auto it = std::find(ids.begin(), ids.end(), 0);
-    ASSERT_NE(it, ids.end()) << "origin marker not detected (roll " << roll << ")";
-    const auto& detected = corners[it - ids.begin()];
-    const std::array<Eigen::Vector2d, 4> measured = MeasureCorners(frame.color, detected);
-    double worst_subpix_px = 0, worst_px = 0;
-    std::vector<cv::Point2f> refined;
-    for (int c = 0; c < 4; ++c) {
-      const Eigen::Vector2d truth = ProjectRoomPoint(K, room_from_camera, origin.corners_m[c]);
-      worst_subpix_px =
-          std::max(worst_subpix_px, (Eigen::Vector2d(detected[c].x, detected[c].y) - truth).norm());
-      worst_px = std::max(worst_px, (measured[c] - truth).norm());
-      refined.emplace_back(static_cast<float>(measured[c].x()), static_cast<float>(measured[c].y()));
-    }
-    // OpenCV's SUBPIX is biased on marker corners; the rendering is not.
-    EXPECT_LT(worst_subpix_px, 1.0) << "roll " << roll;
-    EXPECT_LT(worst_px, 0.1) << "roll " << roll;
-    RecordProperty(roll == 0 ? "corner_error_px_roll0" : "corner_error_px_roll23", std::to_string(worst_px));
-    // Marker side in pixels: the view is close, as intended.
-    EXPECT_GT(cv::norm(detected[0] - detected[1]), 120.0);
+    const Simulator& sim = *simulator;
+    SCOPED_TRACE(sim.profile().name);
+    const CameraIntrinsics& K = sim.profile().intrinsics;
+    const MarkerTruth& origin = sim.world().room_markers.front();
+    ASSERT_EQ(origin.id, 0);
+    EXPECT_TRUE(origin.parent_from_marker.IsApprox(Rigid3d::Identity(), 0, 0));
+    for (double roll : {0.0, 23.0}) {
+      const Rigid3d room_from_camera = CloseViewOfOriginMarker(roll);
+      const SimulatedFrame frame = sim.RenderView(room_from_camera, std::nullopt, /*noise=*/false);
+      cv::Mat gray;
+      cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+      std::vector<std::vector<cv::Point2f>> corners;
+      std::vector<int> ids;
+      cv::aruco::detectMarkers(gray, Dictionary(), corners, ids, SubpixParams());
+      const auto it = std::find(ids.begin(), ids.end(), 0);
+      ASSERT_NE(it, ids.end()) << "origin marker not detected (roll " << roll << ")";
+      const auto& detected = corners[it - ids.begin()];
+      const std::array<Eigen::Vector2d, 4> measured = MeasureCorners(frame.color, detected);
+      double worst_subpix_px = 0, worst_px = 0;
+      std::vector<cv::Point2f> refined;
+      for (int c = 0; c < 4; ++c) {
+        const Eigen::Vector2d truth = ProjectRoomPoint(K, room_from_camera, origin.corners_m[c]);
+        worst_subpix_px =
+            std::max(worst_subpix_px, (Eigen::Vector2d(detected[c].x, detected[c].y) - truth).norm());
+        worst_px = std::max(worst_px, (measured[c] - truth).norm());
+        refined.emplace_back(static_cast<float>(measured[c].x()), static_cast<float>(measured[c].y()));
+      }
+      // OpenCV's SUBPIX is biased on marker corners; the rendering is not.
+      EXPECT_LT(worst_subpix_px, 1.0) << "roll " << roll;
+      EXPECT_LT(worst_px, 0.1) << "roll " << roll;
+      RecordProperty(roll == 0 ? "corner_error_px_roll0" : "corner_error_px_roll23", std::to_string(worst_px));
+      // Marker side in pixels: the view is close, as intended.
+      EXPECT_GT(cv::norm(detected[0] - detected[1]), 120.0);
 
-    const double h = origin.size_m / 2;
-    const std::vector<cv::Point3f> object = {{float(-h), float(h), 0}, {float(h), float(h), 0},
-                                             {float(h), float(-h), 0}, {float(-h), float(-h), 0}};
-    cv::Vec3d rvec, tvec;
-    ASSERT_TRUE(cv::solvePnP(object, refined, K.CvK(), K.CvDistortion(), rvec, tvec, false,
-                             cv::SOLVEPNP_IPPE_SQUARE));
-    const Rigid3d camera_from_marker = Rigid3d::FromRotationVector(
-        Eigen::Vector3d(rvec[0], rvec[1], rvec[2]), Eigen::Vector3d(tvec[0], tvec[1], tvec[2]));
-    // Marker 0's frame is the room frame.
-    const Rigid3d room_from_camera_est = camera_from_marker.Inverse();
-    const PoseError error = ComputePoseError(room_from_camera, room_from_camera_est);
-    EXPECT_LT(error.translation_mm, 1.0) << "roll " << roll;
-    EXPECT_LT(error.rotation_deg, 0.1) << "roll " << roll;
-    std::printf("%s origin marker, roll %.0f deg: corners %.3f px (OpenCV SUBPIX %.3f px), PnP %.3f mm %.4f deg\n",
-                sim.profile().name.c_str(), roll, worst_px, worst_subpix_px, error.translation_mm, error.rotation_deg);
-  }
+      const double h = origin.size_m / 2;
+      const std::vector<cv::Point3f> object = {{float(-h), float(h), 0}, {float(h), float(h), 0},
+                                               {float(h), float(-h), 0}, {float(-h), float(-h), 0}};
+      cv::Vec3d rvec, tvec;
+      ASSERT_TRUE(cv::solvePnP(object, refined, K.CvK(), K.CvDistortion(), rvec, tvec, false,
+                               cv::SOLVEPNP_IPPE_SQUARE));
+      const Rigid3d camera_from_marker = Rigid3d::FromRotationVector(
+          Eigen::Vector3d(rvec[0], rvec[1], rvec[2]), Eigen::Vector3d(tvec[0], tvec[1], tvec[2]));
+      // Marker 0's frame is the room frame.
+      const Rigid3d room_from_camera_est = camera_from_marker.Inverse();
+      const PoseError error = ComputePoseError(room_from_camera, room_from_camera_est);
+      EXPECT_LT(error.translation_mm, 1.0) << "roll " << roll;
+      EXPECT_LT(error.rotation_deg, 0.1) << "roll " << roll;
+      std::printf("%s origin marker, roll %.0f deg: corners %.3f px (OpenCV SUBPIX %.3f px), PnP %.3f mm %.4f deg\n",
+                  sim.profile().name.c_str(), roll, worst_px, worst_subpix_px, error.translation_mm, error.rotation_deg);
+    }
   }
 }
 
