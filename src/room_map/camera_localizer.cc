@@ -3,6 +3,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <future>
 #include <limits>
@@ -99,6 +100,10 @@ std::string CameraLocalizerOptions::Validate() const {
            room_plane_step_px < 1 || room_plane_min_samples < 1 || !(room_plane_max_effective >= 1) ||
            !(room_plane_min_spread_m >= 0))
     out << "room plane settings must be positive (at least 2 markers a plane)";
+  else if (!(room_surface_gate_m > 0) || !(room_surface_sigma_m >= 0) ||
+           !(room_surface_min_incidence >= 0 && room_surface_min_incidence < 1) ||
+           room_surface_min_samples < 1 || !(room_surface_max_effective >= 1))
+    out << "room surface settings must be positive (incidence a cosine below 1)";
   else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
@@ -173,6 +178,10 @@ struct CameraLocalizer::Impl {
   // Ideal rays of the plane sample grid, (x, y) of (x, y, 1), and their pixels.
   std::vector<Eigen::Vector2d> plane_grid_ray;
   std::vector<cv::Point> plane_grid_px;
+  // The map's still surface (empty: not used).
+  RoomSurfaceIndex surface;
+  // Depth samples the last AddRoomDepths matched.
+  int plane_samples_used = 0, surface_samples_used = 0;
 
   Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
       : map(m), K(k), options(o), extractor(o.keypoints) {
@@ -182,6 +191,8 @@ struct CameraLocalizer::Impl {
     d.intrinsics = distortion ? std::optional<CameraIntrinsics>(K) : std::nullopt;
     detector = std::make_unique<MarkerDetector>(d);
     if (options.use_room_planes) FindRoomPlanes();
+    if (options.use_room_surface && !map.surface.empty()) surface = RoomSurfaceIndex(map.surface);
+    if (!planes.empty() || !surface.empty()) MakeDepthGrid();
   }
 
   // Groups the map's markers by plane (normals within 3 deg, centres within
@@ -226,7 +237,10 @@ struct CameraLocalizer::Impl {
       for (size_t j : best) plane.marker_centres.push_back(map.markers[j].room_from_marker.translation);
       planes.push_back(std::move(plane));
     }
-    if (planes.empty()) return;
+  }
+
+  // The depth sample grid of the planes and the surface.
+  void MakeDepthGrid() {
     // About 80 samples across the image whatever its size (the samples of
     // a plane count as room_plane_max_effective at most anyway).
     const int step = std::max(options.room_plane_step_px, K.width / 80);
@@ -245,10 +259,10 @@ struct CameraLocalizer::Impl {
     }
   }
 
-  // Depth pixels on the map's planes at `camera_from_room` (the first
-  // refinement's pose), added to corr as plane-depth terms.
-  void AddRoomPlaneDepths(const Rigid3d& camera_from_room) {
-    if (planes.empty() || depth_image == nullptr || depth_image->empty()) return;
+  // Depth pixels on the map's planes and its surface at `camera_from_room`
+  // (the first refinement's pose), added to corr as plane-depth terms.
+  void AddRoomDepths(const Rigid3d& camera_from_room, const Mat6* pose_cov) {
+    if ((planes.empty() && surface.empty()) || depth_image == nullptr || depth_image->empty()) return;
     const Rigid3d room_from_camera = camera_from_room.Inverse();
     struct Sample {
       size_t ray;
@@ -256,6 +270,13 @@ struct CameraLocalizer::Impl {
     };
     std::vector<std::vector<Sample>> on(planes.size());
     std::vector<std::vector<Eigen::Vector3d>> on_points(planes.size());  // parallel, camera frame
+    // Surface samples by their normal's main room axis.
+    struct SurfaceSample {
+      size_t ray;
+      double z;
+      int point;
+    };
+    std::array<std::vector<SurfaceSample>, 3> on_surface;
     const double support2 = options.room_plane_support_m * options.room_plane_support_m;
     for (size_t i = 0; i < plane_grid_ray.size(); ++i) {
       const uint16_t raw = depth_image->at<uint16_t>(plane_grid_px[i]);
@@ -264,15 +285,49 @@ struct CameraLocalizer::Impl {
       const Eigen::Vector3d xc(plane_grid_ray[i].x() * z, plane_grid_ray[i].y() * z, z);
       const Eigen::Vector3d x = room_from_camera * xc;
       const double gate = std::max(options.room_plane_gate_m, 3 * DepthSigma(z));
-      for (size_t p = 0; p < planes.size(); ++p) {
+      bool taken = false;
+      for (size_t p = 0; p < planes.size() && !taken; ++p) {
         if (std::abs(planes[p].normal.dot(x) - planes[p].offset) > gate) continue;
         bool near = false;
         for (const auto& c : planes[p].marker_centres) near |= (x - c).squaredNorm() < support2;
         if (near) {
           on[p].push_back({i, z});
           on_points[p].push_back(xc);
-          break;
+          taken = true;
         }
+      }
+      if (taken || surface.empty()) continue;
+      const int s = surface.Nearest(x);
+      if (s < 0) continue;
+      const Eigen::Vector3d& n = surface.normal(s);
+      const double residual = n.dot(x - surface.point(s));
+      if (std::abs(residual) > std::max(options.room_surface_gate_m, 3 * DepthSigma(z))) continue;
+      const Eigen::Vector3d nc = camera_from_room.rotation * n;
+      const double incidence = std::abs(nc.dot(xc.normalized()));
+      if (incidence < options.room_surface_min_incidence) continue;
+      if (pose_cov != nullptr) {
+        // The residual must agree with the first refinement's pose within
+        // its uncertainty: a residual r = n.(x - q) moves by
+        // -(y x n_c).omega - n_c.dt for a perturbation (omega, dt) of
+        // camera_from_room (pose_refiner.cc's update).
+        Eigen::Matrix<double, 6, 1> J;
+        J << -xc.cross(nc), -nc;
+        const double along = DepthSigma(z) * incidence;
+        const double var = along * along + J.dot(*pose_cov * J) +
+                           options.room_surface_sigma_m * options.room_surface_sigma_m;
+        if (residual * residual > 9 * var) continue;
+      }
+      Eigen::Index axis = 0;
+      n.cwiseAbs().maxCoeff(&axis);
+      on_surface[axis].push_back({i, z, s});
+    }
+    for (const std::vector<SurfaceSample>& group : on_surface) {
+      if (static_cast<int>(group.size()) < options.room_surface_min_samples) continue;
+      const double share = std::sqrt(std::max(1.0, group.size() / options.room_surface_max_effective));
+      surface_samples_used += static_cast<int>(group.size());
+      for (const SurfaceSample& g : group) {
+        corr.AddPlaneDepth(surface.point(g.point), surface.normal(g.point), plane_grid_ray[g.ray], g.z,
+                           DepthSigma(g.z) * share);
       }
     }
     for (size_t p = 0; p < planes.size(); ++p) {
@@ -309,6 +364,7 @@ struct CameraLocalizer::Impl {
       if (count < options.room_plane_min_samples) continue;
       const double share = std::sqrt(std::max(1.0, count / options.room_plane_max_effective));
       const Eigen::Vector3d point = planes[p].normal * planes[p].offset;
+      plane_samples_used += static_cast<int>(kept.size());
       for (const Sample* s : kept) {
         corr.AddPlaneDepth(point, planes[p].normal, plane_grid_ray[s->ray], s->z, DepthSigma(s->z) * share);
       }
@@ -614,17 +670,24 @@ struct CameraLocalizer::Impl {
   // the refined pose again with the small radius. Returns the last refinement.
   PoseRefinementResult Track(const Rigid3d& initial, double radius, const std::optional<PosePrior>& prior,
                              double* matching_ms, double* refinement_ms, double* mark) {
+    plane_samples_used = surface_samples_used = 0;
     if (options.use_keypoints) SearchByProjection(initial, radius);
     Lap(mark, matching_ms);
     BuildCorrespondences();
     PoseRefinementResult r = RefineCameraPose(corr, K, initial, options.refiner, prior);
     Lap(mark, refinement_ms);
     const bool keypoints = options.use_keypoints && !map.landmarks_in_room.empty();
-    if (keypoints || !planes.empty()) {
+    if (keypoints || !planes.empty() || !surface.empty()) {
       if (keypoints) SearchByProjection(r.camera_from_room, options.refined_search_radius_px);
       Lap(mark, matching_ms);
       BuildCorrespondences();
-      if (r.converged) AddRoomPlaneDepths(r.camera_from_room);
+      if (r.converged) {
+        const Eigen::LDLT<Mat6> ldlt(r.information);
+        Mat6 cov = Mat6::Zero();
+        const bool have = ldlt.info() == Eigen::Success && (r.information.diagonal().array() > 0).all();
+        if (have) cov = ldlt.solve(Mat6::Identity());
+        AddRoomDepths(r.camera_from_room, have && cov.allFinite() ? &cov : nullptr);
+      }
       r = RefineCameraPose(corr, K, r.camera_from_room, options.refiner, prior);
       Lap(mark, refinement_ms);
     }
@@ -643,6 +706,8 @@ struct CameraLocalizer::Impl {
     }
     out->markers_used = full;
     out->keypoints_used = r.keypoint_inliers;
+    out->plane_depth_samples = plane_samples_used;
+    out->surface_depth_samples = surface_samples_used;
     out->rms_px = r.rms_px;
     out->marker_rms_px = r.marker_rms_px;
     out->keypoint_rms_px = r.keypoint_rms_px;

@@ -107,6 +107,24 @@ struct CameraLocalizerOptions {
   int room_plane_step_px = 8;
   int room_plane_min_samples = 40;
   double room_plane_max_effective = 25;
+  /// The room's still surface in depth (the map's RoomSurface, kept by the
+  /// planning stage): the same grid's pixels that no plane took, put in the
+  /// room by the first refinement, matched to the nearest surface point
+  /// within room_surface_gate_m (or 3 sigma(z)) along its normal, seen at
+  /// least room_surface_min_incidence (cosine) face-on. The samples are
+  /// grouped by their normal's main room axis; a group counts as at most
+  /// room_surface_max_effective independent samples.
+  bool use_room_surface = true;
+  double room_surface_gate_m = 0.03;
+  /// A sample is used only when its distance from the surface agrees with
+  /// the first refinement's pose within 3 sigma: its depth noise, the pose's
+  /// own uncertainty there, and this much error of the surface's placement.
+  /// (A surface the map placed a few centimetres off, a wall far from the
+  /// couch, would otherwise pull a well-held camera.)
+  double room_surface_sigma_m = 0.002;
+  double room_surface_min_incidence = 0.25;
+  int room_surface_min_samples = 20;
+  double room_surface_max_effective = 25;
   /// Tracking search: radius around the predicted pixel, descriptor distance,
   /// and the best/second-best ratio for a match.
   double search_radius_px = 15;
@@ -226,6 +244,10 @@ struct LocalizationResult {
   LocalizationStatus status = LocalizationStatus::kLost;
   int markers_used = 0;      ///< markers with all 4 corners inliers
   int keypoints_used = 0;    ///< keypoint inliers
+  /// Depth samples matched to the map's planes and to its surface (0: none
+  /// used, or no depth).
+  int plane_depth_samples = 0;
+  int surface_depth_samples = 0;
   double rms_px = 0;         ///< RMS reprojection error over all inliers
   double marker_rms_px = 0;
   double keypoint_rms_px = 0;

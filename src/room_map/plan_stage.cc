@@ -106,6 +106,9 @@ RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingI
                           r.room_frame_couch_sigma_mm);
   if (!r.camera_response.empty()) details += "; " + OneLine(r.camera_response);
   if (!r.depth_correction.empty()) details += "; " + OneLine(r.depth_correction);
+  if (!map.surface.empty()) {
+    details += StringPrintf("; room surface %zu points (%.0f mm voxels)", map.surface.size(), 1000 * map.surface.voxel_m);
+  }
   RoomMapId id;
   database->WithTransaction([&] {
     id = database->AddRoomMap(record);

@@ -43,6 +43,7 @@ std::string RoomMap::Validate() const {
       return out.str();
     }
   }
+  if (std::string r = surface.Validate(); !r.empty()) return r;
   return "";
 }
 
@@ -94,6 +95,11 @@ RoomMapRecord ToRecord(const RoomMap& map, PlanId plan, std::optional<RecordingI
   }
   record.camera_response = map.camera_response.Serialize();
   record.depth_correction = map.depth_correction.Serialize();
+  if (!map.surface.empty()) {
+    record.surface.points = map.surface.points;
+    record.surface.normals = map.surface.normals;
+    record.surface_voxel_m = map.surface.voxel_m;
+  }
   return record;
 }
 
@@ -152,6 +158,11 @@ RoomMap FromRecord(const RoomMapRecord& record) {
   }
   if (!record.depth_correction.empty()) {
     map.depth_correction = DepthCorrection::Parse(record.depth_correction, where + ": stored depth correction");
+  }
+  if (!record.surface.points.empty()) {
+    map.surface.voxel_m = record.surface_voxel_m;
+    map.surface.points = record.surface.points;
+    map.surface.normals = record.surface.normals;
   }
   const std::string problem = map.Validate();
   if (!problem.empty()) ARPOS_INPUT_ERROR(where << ": " << problem);

@@ -28,6 +28,7 @@
 #include "features/camera_response.h"
 #include "features/marker_observation.h"
 #include "geometry/rigid3.h"
+#include "room_map/room_surface.h"
 #include "sensor/depth_correction.h"
 #include "store/records.h"
 
@@ -64,6 +65,9 @@ struct RoomMap {
   /// The depth camera's systematic error measured against the room's markers
   /// (identity when the depth agreed): removed from later recordings' depth.
   DepthCorrection depth_correction;
+  /// The room's still surface near the couch as the room recording's depth
+  /// showed it (room_surface.h); empty for maps stored before it was kept.
+  RoomSurface surface;
 
   /// The marker with this id, or nullptr.
   const RoomMapMarkerEntry* FindMarker(int id) const;

@@ -402,6 +402,7 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (max_landmarks < 0) out << "max_landmarks must not be negative";
   else if (!(landmark_voxel_m > 0)) out << "landmark_voxel_m must be positive";
   else if (!(outlier_sigmas > 0)) out << "outlier_sigmas must be positive";
+  else if (build_surface && !(r = surface.Validate()).empty()) out << "surface: " << r;
   else if (!(depth_inflation_threshold >= 1)) out << "depth_inflation_threshold must be at least 1";
   else if (!(max_room_frame_tilt_sigma_deg > 0) || !(max_room_frame_couch_sigma_mm > 0)) {
     out << "room frame tolerances must be positive";
@@ -466,6 +467,7 @@ std::string RoomMapBuildReport::ToText() const {
                       marker_rms_px, keypoint_rms_px, keypoint_depth_rms_m * 1000);
   out << StringPrintf("depth scale check (measured / map-predicted depth in markers): %.4f (MAD %.4f)\n",
                       depth_scale_ratio, depth_scale_ratio_mad);
+  if (surface.frames > 0) out << surface.ToText() << "\n";
   out << StringPrintf("adjustment: markers %d it %.2f s; joint %d it %.2f s\n",
                       marker_adjustment.iterations, marker_adjustment.seconds,
                       joint_adjustment.iterations, joint_adjustment.seconds);
@@ -1603,6 +1605,16 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
                       << report.unconnected_markers.size()
                       << "): record the room again with views that show the origin marker together "
                          "with other room markers, e.g. walking from it to the couch");
+  }
+  if (options.build_surface) {
+    const auto keep = [&options](const Eigen::Vector3d& x) {
+      for (const auto& box : options.exclude_landmarks) {
+        if (box.Contains(x)) return false;
+      }
+      return true;
+    };
+    map.surface = BuildRoomSurface(sequence, K, map.depth_correction, report.room_from_camera, keep,
+                                   options.couch_point_in_room, options.surface, &report.surface);
   }
   const std::string problem = map.Validate();
   ARPOS_CHECK(problem.empty(), "built an inconsistent room map: " << problem);

@@ -159,6 +159,11 @@ struct RoomMapBuildOptions {
   /// Observations with a reprojection error above this many sigmas after the
   /// first joint adjustment are dropped before the second.
   double outlier_sigmas = 4.0;
+  /// Keep the room's still surface near couch_point_in_room (outside the
+  /// exclusion boxes) from the room frames' depth, placed by the adjusted
+  /// cameras, for the localiser to register depth to (room_surface.h).
+  bool build_surface = true;
+  RoomSurfaceOptions surface;
 
   std::string Validate() const;
   bool Check(std::string* reason = nullptr) const;
@@ -222,6 +227,7 @@ struct RoomMapBuildReport {
   double room_frame_turn_deg = 0;
   /// 1-sigma position error (mm) the room frame's uncertainty gives at a point.
   double RoomFramePositionSigmaMm(const Eigen::Vector3d& point_in_room) const;
+  RoomSurfaceReport surface;
   /// Camera poses of the used frames (sequence index, room_from_camera).
   std::vector<std::pair<int, Rigid3d>> room_from_camera;
 

@@ -152,6 +152,8 @@ std::string AuditedRowHash(sqlite3* db, const std::string& entity) {
     if (!AppendRows(db, StringPrintf("SELECT * FROM %s WHERE %s = ?1", t.table, t.id_column), id, &data)) return "";
     if (kind == "room_map") {
       AppendRows(db, "SELECT * FROM room_map_markers WHERE room_map_id = ?1 ORDER BY marker_id", id, &data);
+      // Schema 10; a map without a surface row hashes as before.
+      AppendRows(db, "SELECT * FROM room_map_surface WHERE room_map_id = ?1", id, &data);
     } else if (kind == "body_marker_map") {
       AppendRows(db, "SELECT * FROM body_marker_poses WHERE body_marker_map_id = ?1 ORDER BY marker_id", id, &data);
       // Schema 9; a map without breathing rows hashes as before.

@@ -152,6 +152,11 @@ struct RoomMapRecord {
   std::optional<double> room_frame_tilt_sigma_deg;
   std::optional<double> room_frame_yaw_sigma_deg;
   std::optional<double> room_frame_couch_sigma_mm;
+  /// The room's still surface near the couch (room_map/room_surface.h):
+  /// points with unit normals in the room frame, gathered on voxels of
+  /// surface_voxel_m. Empty: none kept (maps from before schema version 10).
+  StoredPointCloud surface;
+  double surface_voxel_m = 0;
   std::int64_t created_unix_ms = 0;
 };
 

@@ -428,6 +428,19 @@ RoomMapId SqliteDatabase::AddRoomMap(const RoomMapRecord& room_map) {
     s->Execute();
   }
   const RoomMapId id(LastInsertRowId());
+  if (!room_map.surface.points.empty()) {
+    ARPOS_CHECK(room_map.surface.normals.size() == room_map.surface.points.size() &&
+                    room_map.surface_voxel_m > 0 && room_map.surface_voxel_m < 1,
+                "room map surface: " << room_map.surface.points.size() << " points, "
+                                     << room_map.surface.normals.size() << " normals, voxel "
+                                     << room_map.surface_voxel_m << " m");
+    SqliteStatementGuard s(
+        Prepared("INSERT INTO room_map_surface (room_map_id, voxel_m, points) VALUES (?1, ?2, ?3)"));
+    s->BindId(1, id);
+    s->BindDouble(2, room_map.surface_voxel_m);
+    s->BindBlob(3, EncodePointCloud(room_map.surface));
+    s->Execute();
+  }
   for (const RoomMapMarker& marker : room_map.markers) {
     SqliteStatementGuard s(Prepared(
         "INSERT INTO room_map_markers (room_map_id, marker_id, corners_in_room, residual_px, "
@@ -475,6 +488,19 @@ std::optional<RoomMapRecord> SqliteDatabase::GetRoomMap(RoomMapId id) {
     room_map.room_frame_tilt_sigma_deg = OptionalDouble(*s, 11);
     room_map.room_frame_yaw_sigma_deg = OptionalDouble(*s, 12);
     room_map.room_frame_couch_sigma_mm = OptionalDouble(*s, 13);
+  }
+  {
+    SqliteStatementGuard s(Prepared("SELECT voxel_m, points FROM room_map_surface WHERE room_map_id = ?1"));
+    s->BindId(1, id);
+    if (s->Step()) {
+      const std::string what = Context("room_map_surface.points", "room map", id.value());
+      room_map.surface_voxel_m = s->ColumnDouble(0);
+      room_map.surface = DecodePointCloud(s->ColumnBlob(1), what);
+      if (room_map.surface.normals.size() != room_map.surface.points.size()) {
+        throw CorruptBlobError(what + ": " + std::to_string(room_map.surface.points.size()) + " points but " +
+                               std::to_string(room_map.surface.normals.size()) + " normals");
+      }
+    }
   }
   SqliteStatementGuard s(Prepared(
       "SELECT marker_id, corners_in_room, residual_px, num_observations FROM room_map_markers "

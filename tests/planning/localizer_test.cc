@@ -100,6 +100,7 @@ TEST(Localizer, TheFloorsDepthHoldsTheCamerasHeightAndTiltOnKeypointOnlyFrames) 
     CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
     options.use_markers = false;
     options.use_room_planes = planes;
+    options.use_room_surface = false;  // the planes alone (the surface has its own test)
     CameraLocalizer localizer(map, c.folder.config.camera, options);
     Errors e;
     for (size_t i = 0; i < seq.size(); ++i) {
@@ -125,6 +126,85 @@ TEST(Localizer, TheFloorsDepthHoldsTheCamerasHeightAndTiltOnKeypointOnlyFrames) 
   EXPECT_LT(with.vertical_mm, 0.7 * without.vertical_mm);
   EXPECT_LT(with.tilt_deg, 0.7 * without.tilt_deg);
   EXPECT_LT(with.mean_mm, without.mean_mm);
+}
+
+// The room's still surface in depth (room_surface.h): the map keeps the
+// floor and the couch base near the couch as the room frames' depth saw
+// them, placed by the adjusted cameras, and nothing inside the couch's
+// exclusion box (the couch top moves). Registered to each frame's depth it
+// holds a camera that keypoints alone leave weak (markers and marker planes
+// not used, 100 landmarks): both runs the same but for the surface.
+TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
+  const auto& c = GetSmallCase();
+  const Sequence room = Sequence::Open(c.folder.room_dir);
+  const RoomMapBuildOptions build = HundredLandmarks(c.folder);
+  const RoomMapBuildResult result = BuildRoomMap(room, c.folder.config, build);
+  const RoomMap& map = result.map;
+  ASSERT_GT(map.surface.size(), 1000u) << result.report.ToText();
+  EXPECT_NE(result.report.ToText().find("room surface: "), std::string::npos);
+  // The floor's points lie on the floor (0.3 mm under the origin marker's
+  // printed face: simulation.yaml's room_frame); the couch base's long faces
+  // 0.2 m either side of the couch's centre line (the isocentre's x); none
+  // is in the exclusion box; none is beyond the radius.
+  constexpr double kFloorZ = -0.0003;
+  const Eigen::Vector3d iso = c.truth.isocentre_in_room_m;
+  double floor_sum = 0, base_sum = 0;
+  int floor_points = 0, base_points = 0, excluded = 0, beyond = 0;
+  for (size_t i = 0; i < map.surface.size(); ++i) {
+    const Eigen::Vector3d p = map.surface.points[i].cast<double>();
+    const Eigen::Vector3d n = map.surface.normals[i].cast<double>();
+    if (std::abs(n.z()) > 0.98 && std::abs(p.z()) < 0.05) {
+      floor_sum += std::abs(p.z() - kFloorZ);
+      ++floor_points;
+    }
+    if (std::abs(n.x()) > 0.98 && p.z() > 0.1 && p.z() < 0.6 && std::abs(p.x() - iso.x()) < 0.3) {
+      base_sum += std::abs(std::abs(p.x() - iso.x()) - 0.2);
+      ++base_points;
+    }
+    for (const auto& box : build.exclude_landmarks) excluded += box.Contains(p);
+    beyond += (p - build.couch_point_in_room).norm() > build.surface.radius_m + build.surface.voxel_m;
+  }
+  std::printf("surface: %zu points, floor %d (mean |dz| %.2f mm), couch base sides %d (mean %.2f mm off)\n",
+              map.surface.size(), floor_points, 1000 * floor_sum / std::max(1, floor_points), base_points,
+              1000 * base_sum / std::max(1, base_points));
+  ASSERT_GT(floor_points, 500);
+  EXPECT_LT(floor_sum / floor_points, 0.002);
+  ASSERT_GT(base_points, 20);
+  EXPECT_LT(base_sum / base_points, 0.004);
+  EXPECT_EQ(excluded, 0);
+  EXPECT_EQ(beyond, 0);
+
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  auto localise = [&](bool surface, int* ok, int* samples) {
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+    options.use_markers = false;
+    options.use_room_planes = false;
+    options.use_room_surface = surface;
+    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    double sum = 0;
+    *ok = 0;
+    *samples = 0;
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+      if (!r.ok) continue;
+      sum += ComputePoseError(gt[i].room_from_x, r.room_from_camera).translation_mm;
+      *samples += r.surface_depth_samples;
+      ++*ok;
+    }
+    return *ok ? sum / *ok : 0.0;
+  };
+  int ok_without = 0, ok_with = 0, samples_without = 0, samples_with = 0;
+  const double without = localise(false, &ok_without, &samples_without);
+  const double with = localise(true, &ok_with, &samples_with);
+  std::printf("keypoint-only, 100 landmarks, no marker planes: without the surface %d frames, %.2f mm; with it "
+              "%d frames, %.2f mm (%d surface samples)\n",
+              ok_without, without, ok_with, with, samples_with);
+  EXPECT_EQ(samples_without, 0);
+  EXPECT_GT(samples_with, 100 * ok_with);
+  EXPECT_GE(ok_with, ok_without);
+  EXPECT_LT(with, 0.9 * without);
 }
 
 // Keypoints alone can agree on a wrong place (repeated texture); a
@@ -156,6 +236,7 @@ TEST(Localizer, LandmarksPlacedAfterTheAdjustmentHelpKeypointOnlyFrames) {
   auto localise = [&](const RoomMap& map, double* mean_mm, double* max_mm) {
     CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
     options.use_markers = false;
+    options.use_room_surface = false;  // what the landmarks do (the surface has its own test)
     CameraLocalizer localizer(map, c.folder.config.camera, options);
     int ok = 0;
     *mean_mm = 0;

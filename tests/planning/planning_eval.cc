@@ -17,7 +17,10 @@
 // MIN_LM_OBS, MAX_LM, LM_VOXEL, SUPPORT_PX, CORNER_FLOOR, RELOC_SIGMA_M, MAX_SIGMA_M (option overrides),
 // NO_FILTER=1 (no constant-velocity filter), NO_PRIOR=1 (no motion prior at all),
 // TRUTH_START=1 (every frame relocalised from its true pose), TILT_GATE_ONLY=1 (the
-// origin's tilt fused with its coplanar markers only when the tilt itself is weak).
+// origin's tilt fused with its coplanar markers only when the tilt itself is weak),
+// NO_SURFACE=1 (the localiser without the room's surface), SURF_FLAT, SURF_VOXEL,
+// SURF_RADIUS (surface option overrides), SURF_XYZ=FILE (the surface's points
+// and normals written one a line).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
 // camera error does to the patient's position).
@@ -40,6 +43,7 @@
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
 #include "sensor/case_folder.h"
+#include "sensor/depth_correction.h"
 #include "sensor/sequence.h"
 #include "store/sqlite_database.h"
 #include "simulation/simulation_truth.h"
@@ -84,6 +88,9 @@ int main(int argc, char** argv) {
     RoomMapBuildOptions build_options = MakeRoomMapBuildOptions(folder, stage);
     build_options.bundle_adjustment.use_marker_depth = marker_depth;
     build_options.bundle_adjustment.use_keypoint_depth = keypoint_depth;
+    if (const char* v = std::getenv("SURF_FLAT")) build_options.surface.max_unflatness_m = std::atof(v);
+    if (const char* v = std::getenv("SURF_VOXEL")) build_options.surface.voxel_m = std::atof(v);
+    if (const char* v = std::getenv("SURF_RADIUS")) build_options.surface.radius_m = std::atof(v);
     if (response != "estimate") {
       build_options.estimate_response = false;
       build_options.detector.edge.response = CameraResponse::FromName(response);
@@ -107,6 +114,28 @@ int main(int argc, char** argv) {
       build = BuildRoomMap(room, folder.config, build_options);
     }
     std::cout << build.report.ToText();
+    if (const char* v = std::getenv("SURF_KEEP_RADIUS")) {
+      // Only the surface within this distance of the couch point.
+      RoomSurface kept;
+      kept.voxel_m = build.map.surface.voxel_m;
+      const Eigen::Vector3d centre = folder.room_from_model_target.translation;
+      for (size_t i = 0; i < build.map.surface.size(); ++i) {
+        if ((build.map.surface.points[i].cast<double>() - centre).norm() > std::atof(v)) continue;
+        kept.points.push_back(build.map.surface.points[i]);
+        kept.normals.push_back(build.map.surface.normals[i]);
+      }
+      build.map.surface = kept;
+    }
+    if (const char* v = std::getenv("SURF_XYZ")) {
+      // The map's room surface, one point and normal a line (room frame).
+      FILE* f = std::fopen(v, "w");
+      for (size_t i = 0; f && i < build.map.surface.size(); ++i) {
+        const auto& p = build.map.surface.points[i];
+        const auto& n = build.map.surface.normals[i];
+        std::fprintf(f, "%.4f %.4f %.4f %.3f %.3f %.3f\n", p.x(), p.y(), p.z(), n.x(), n.y(), n.z());
+      }
+      if (f) std::fclose(f);
+    }
 
     // Markers against the truth.
     const sim::SimulationTruth truth = sim::LoadSimulationTruth(case_dir / "simulation.yaml");
@@ -231,6 +260,9 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("MAX_SIGMA_M")) options.max_position_sigma_m = std::atof(v);
     if (const char* v = std::getenv("MAX_EDGE_PX")) options.detector.edge.max_pixels_per_edge = std::atoi(v);
     if (std::getenv("NO_PLANES")) options.use_room_planes = false;
+    if (std::getenv("NO_SURFACE")) options.use_room_surface = false;
+    if (const char* v = std::getenv("SURF_MAXEFF")) options.room_surface_max_effective = std::atof(v);
+    if (const char* v = std::getenv("SURF_GATE")) options.room_surface_gate_m = std::atof(v);
     if (const char* v = std::getenv("BAND_PX")) options.detector.edge.band_half_width_px = std::atof(v);
     if (const char* v = std::getenv("ACCEL")) options.motion_accel_m_s2 = std::atof(v);
     if (const char* v = std::getenv("ANG_ACCEL")) options.motion_angular_accel_rad_s2 = std::atof(v);
@@ -260,7 +292,9 @@ int main(int argc, char** argv) {
       double ms = 0;
       LocalizationTimings sum_t;
       for (size_t i = 0; i < seq.size(); ++i) {
-        const RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
+        RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
+        // As tracking reads it: the map's depth correction removed.
+        if (!frame.depth.empty()) CorrectDepthImage(folder.config.camera, build.map.depth_correction, &frame.depth);
         if (std::getenv("FLOOR_CHECK") && seq.CameraGroundTruth()) {
           // The floor (room z = 0) as the depth shows it from the true camera.
           const CameraIntrinsics& K = folder.config.camera;
@@ -310,8 +344,9 @@ int main(int argc, char** argv) {
                          truth.isocentre_in_room_m).norm() * 1000;
             }
           }
-          std::cout << StringPrintf("    f%03zu %-11s m%d k%3d sig %.2fmm %.3fdeg iso %.2f [%s ]\n", i,
+          std::cout << StringPrintf("    f%03zu %-11s m%d k%3d p%4d s%4d sig %.2fmm %.3fdeg iso %.2f [%s ]\n", i,
                                     LocalizationStatusName(r.status), r.markers_used, r.keypoints_used,
+                                    r.plane_depth_samples, r.surface_depth_samples,
                                     r.position_sigma_mm, r.rotation_sigma_deg, iso_err, ids.c_str());
         }
         if (!r.ok) {
@@ -345,14 +380,26 @@ int main(int argc, char** argv) {
         const Eigen::Vector3d iso = truth.isocentre_in_room_m;
         double sum_iso = 0;
         int count = 0;
+        Eigen::Vector3d sum_v = Eigen::Vector3d::Zero();
+        Eigen::Matrix3d sum_vv = Eigen::Matrix3d::Zero();
         for (const auto& p : est) {
           for (const auto& g : gt) {
             if (std::abs(g.timestamp_s - p.timestamp_s) > 1e-4) continue;
-            sum_iso += (p.room_from_x * (g.room_from_x.Inverse() * iso) - iso).norm() * 1000;
+            const Eigen::Vector3d v = (p.room_from_x * (g.room_from_x.Inverse() * iso) - iso) * 1000;
+            sum_iso += v.norm();
+            sum_v += v;
+            sum_vv += v * v.transpose();
             ++count;
           }
         }
-        if (count) std::cout << StringPrintf("  %s isocentre transfer error: mean %.3f mm\n", name.c_str(), sum_iso / count);
+        if (count) {
+          // And apart from its mean (a constant offset, e.g. the room frame's
+          // own error, which the patient's session shares).
+          const Eigen::Vector3d mean = sum_v / count;
+          const double spread = std::sqrt(std::max(0.0, (sum_vv / count - mean * mean.transpose()).trace()));
+          std::cout << StringPrintf("  %s isocentre transfer error: mean %.3f mm (mean vector %.2f %.2f %.2f, RMS about it %.3f mm)\n",
+                                    name.c_str(), sum_iso / count, mean.x(), mean.y(), mean.z(), spread);
+        }
       }
       if (std::getenv("AXES")) {
         // Error of the camera centre in the true camera's axes (x right, y down, z forward).

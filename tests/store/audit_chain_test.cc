@@ -251,6 +251,43 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
       << Verify(added).ToText();
 }
 
+// The room's surface (schema 10) is part of its room map's sealed row:
+// changing or removing it with sqlite3 is named; a map without one seals
+// as before.
+TEST(AuditChain, ARoomMapsSurfaceIsSealedWithIt) {
+  TempDir dir;
+  const fs::path path = dir.path() / "store.db";
+  {
+    const auto db = SqliteDatabase::Open(path.string());
+    AddAuditedSession(db.get(), 1);
+    for (const bool surface : {true, false}) {
+      RoomMapRecord map;
+      map.plan_id = PlanId(1);
+      map.origin_marker_id = 0;
+      map.marker_size_m = 0.1;
+      map.markers = {{0, {}, 0.1, 5}};
+      if (surface) {
+        map.surface_voxel_m = 0.03;
+        map.surface.points = {{0.f, 1.f, 0.f}, {0.5f, 1.f, 0.3f}};
+        map.surface.normals = {{0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}};
+      }
+      const RoomMapId id = db->AddRoomMap(map);
+      db->AppendAudit({AuditId(), 0, "tom (technician)", "build_room_map", "room_map:" + std::to_string(id.value()), ""});
+    }
+    EXPECT_EQ(db->GetRoomMap(RoomMapId(1))->surface.points.size(), 2u);
+    EXPECT_TRUE(db->GetRoomMap(RoomMapId(2))->surface.points.empty());
+  }
+  EXPECT_TRUE(Verify(path).ok()) << Verify(path).ToText();
+  const fs::path changed = CopyOf(path, "changed.db");
+  RawExec(changed, "UPDATE room_map_surface SET voxel_m = 0.05 WHERE room_map_id = 1");
+  EXPECT_NE(Verify(changed).ToText().find("room_map:1 differs from what audit entry"), std::string::npos)
+      << Verify(changed).ToText();
+  const fs::path removed = CopyOf(path, "removed.db");
+  RawExec(removed, "DELETE FROM room_map_surface WHERE room_map_id = 1");
+  EXPECT_NE(Verify(removed).ToText().find("room_map:1 differs from what audit entry"), std::string::npos)
+      << Verify(removed).ToText();
+}
+
 TEST(AuditChain, EntriesFromBeforeTheChainAreCountedApartAndTheChainStartsAfterThem) {
   TempDir dir("arpos_audit");
   const fs::path path = dir.path() / "old.db";

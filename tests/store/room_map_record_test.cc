@@ -154,6 +154,37 @@ TEST_F(RoomMapRecordTest, MalformedStoredTextIsAnInputErrorNamingTheMap) {
   }
 }
 
+// The room's surface (schema 10) round-trips with its voxel size; a map
+// without one reads back empty; a stored surface with a bad normal is an
+// input error naming the map.
+TEST_F(RoomMapRecordTest, TheRoomSurfaceRoundTripsAndABadOneNamesTheMap) {
+  RoomMap map = SomeMap();
+  map.surface.voxel_m = 0.03;
+  map.surface.points = {{0.1f, 0.2f, 0.0f}, {0.55f, 1.3f, 0.4f}};
+  map.surface.normals = {{0.f, 0.f, 1.f}, {1.f, 0.f, 0.f}};
+  const RoomMapId id = db_->AddRoomMap(ToRecord(map, plan()));
+  const RoomMap back = FromRecord(*db_->GetRoomMap(id));
+  EXPECT_EQ(back.surface.voxel_m, 0.03);
+  ASSERT_EQ(back.surface.size(), 2u);
+  EXPECT_EQ(back.surface.points[1], map.surface.points[1]);
+  EXPECT_EQ(back.surface.normals[1], map.surface.normals[1]);
+
+  const RoomMapId plain = db_->AddRoomMap(ToRecord(SomeMap(), plan()));
+  EXPECT_TRUE(FromRecord(*db_->GetRoomMap(plain)).surface.empty());
+
+  RoomMapRecord record = ToRecord(map, plan());
+  record.surface.normals[0] = Eigen::Vector3f(0.f, 0.f, 2.f);
+  record.id = db_->AddRoomMap(record);
+  try {
+    FromRecord(*db_->GetRoomMap(record.id));
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("room map " + std::to_string(record.id.value()) + ": room surface normal 0"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // The plan stage files the room frame's uncertainty from the build report
 // with the map, and says what it measured in the audit log.
 TEST_F(RoomMapRecordTest, StoreRoomMapKeepsTheRoomFrameUncertaintyAndAuditsIt) {

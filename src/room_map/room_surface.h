@@ -1,0 +1,122 @@
+#pragma once
+// The room's static surface near the couch, as the planning recording's
+// depth shows it: a dense model the camera localiser registers each
+// tracking frame's depth to (camera_localizer.h, use_room_surface).
+//
+// Markers and keypoints fix the camera by what is textured and seen; during
+// treatment the camera often sees one room marker or none, and keypoints on
+// a far floor or wall leave it a few millimetres off. The couch base, the
+// floor around it, the gantry and any other still surface near the patient
+// are seen in depth in nearly every frame: each face pins the camera along
+// its normal. So the planning stage keeps the surface it saw, placed by the
+// adjusted room cameras, and tracking matches depth to it point to plane.
+//
+// The surface is a voxel grid (voxel_m) of the depth the room frames saw
+// within radius_m of the couch point, outside the couch's exclusion box
+// (the couch top moves with the patient), each voxel seen in at least
+// min_frames frames. A voxel keeps a point and a normal only where its
+// neighbourhood (the voxels within +-1) is flat: edges, corners and clutter
+// give no reliable normal and are left out.
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "geometry/rigid3.h"
+#include "sensor/depth_correction.h"
+#include "sensor/intrinsics.h"
+
+namespace arpos {
+
+class Sequence;
+
+struct RoomSurface {
+  double voxel_m = 0;                    ///< grid the points were gathered on (0: no surface)
+  std::vector<Eigen::Vector3f> points;   ///< room frame, m: on the local plane
+  std::vector<Eigen::Vector3f> normals;  ///< unit, row for row (the sign carries no meaning)
+
+  bool empty() const { return points.empty(); }
+  size_t size() const { return points.size(); }
+  /// Empty if consistent, else what is wrong (sizes match, finite, unit
+  /// normals, a positive voxel size when there are points).
+  std::string Validate() const;
+};
+
+struct RoomSurfaceOptions {
+  double voxel_m = 0.03;
+  /// Around the couch point: what the tracking camera sees near the patient
+  /// (the couch base, the floor about it, the gantry's face), where the
+  /// map's cameras are best placed. Measured on simulated cases: a wall
+  /// 2.2-2.5 m from the couch point that the map had placed about 2 cm off
+  /// pulled keypoint-only frames 15-37 mm off with 2.5 m; 1.0, 1.5 and
+  /// 2.0 m gave the same poses there.
+  double radius_m = 1.5;
+  /// Depth samples across the image per frame (a grid; more rows follow
+  /// the aspect ratio).
+  int samples_across = 160;
+  double min_depth_m = 0.3;
+  double max_depth_m = 4.0;
+  int min_frames = 3;
+  /// Depth noise, sigma(z) = const + quad * z^2: samples are weighted by it.
+  double depth_sigma_const_m = 0.001;
+  double depth_sigma_quad_per_m = 0.0015;
+  /// A voxel's neighbourhood (+-1 voxel) must be flat: the weighted
+  /// variance of its samples across their plane at most 4 times what the
+  /// depth noise gives, plus this squared (m).
+  double max_unflatness_m = 0.003;
+  /// And span a patch in both directions (RMS along its narrower extent, m).
+  double min_extent_m = 0.015;
+  int max_points = 120000;
+
+  std::string Validate() const;
+};
+
+struct RoomSurfaceReport {
+  int frames = 0;          ///< frames whose depth was read
+  int samples = 0;         ///< depth samples gathered (inside the radius, outside exclusions)
+  int voxels = 0;          ///< voxels seen in at least min_frames frames
+  int flat_voxels = 0;     ///< of them, flat: the surface's points
+  double seconds = 0;
+  std::string ToText() const;
+};
+
+/// Gathers the surface from the depth of `sequence`'s frames at the given
+/// camera poses (sequence index, room_from_camera), with `correction`
+/// removed from the depth first. `keep` says whether a room point may enter
+/// (false inside exclusion boxes); `centre` is the couch point. Frames whose
+/// depth cannot be read are skipped (the map builder reported them).
+RoomSurface BuildRoomSurface(const Sequence& sequence, const CameraIntrinsics& intrinsics,
+                             const DepthCorrection& correction,
+                             const std::vector<std::pair<int, Rigid3d>>& room_from_camera,
+                             const std::function<bool(const Eigen::Vector3d&)>& keep,
+                             const Eigen::Vector3d& centre, const RoomSurfaceOptions& options,
+                             RoomSurfaceReport* report = nullptr);
+
+/// Nearest-point lookup on a surface's voxel grid.
+class RoomSurfaceIndex {
+ public:
+  RoomSurfaceIndex() = default;
+  explicit RoomSurfaceIndex(const RoomSurface& surface);
+  bool empty() const { return cells_.empty(); }
+  /// The surface point nearest to `x` among those in the 27 voxels about
+  /// x's voxel, or -1 when there is none.
+  int Nearest(const Eigen::Vector3d& x) const;
+  const Eigen::Vector3d& point(int i) const { return points_[i]; }
+  const Eigen::Vector3d& normal(int i) const { return normals_[i]; }
+
+ private:
+  double inv_voxel_ = 0;
+  std::vector<Eigen::Vector3d> points_, normals_;
+  std::unordered_map<std::uint64_t, std::vector<int>> cells_;
+};
+
+/// Key of the voxel (i, j, k) on a grid (21 bits a coordinate, offset so
+/// negative indices work).
+std::uint64_t RoomVoxelKey(int i, int j, int k);
+
+}  // namespace arpos
