@@ -739,6 +739,7 @@ TEST(SqliteDatabase, InfoAndDescriptionCountEveryTable) {
       "alignments",          "audit_log",          "body_marker_maps", "body_marker_poses",
       "body_marker_motion",  "body_surface_motion", "patients",         "plans",
       "reconstructions",     "recordings",         "room_maps",        "room_map_markers",
+      "room_map_surface",
       "sessions",            "tracking_frames",    "tracking_runs",    "session_activity"};
   EXPECT_EQ(tables, expected);
   EXPECT_EQ(info.RowCount("patients"), 1);
