@@ -191,7 +191,10 @@ struct CameraLocalizer::Impl {
     d.intrinsics = distortion ? std::optional<CameraIntrinsics>(K) : std::nullopt;
     detector = std::make_unique<MarkerDetector>(d);
     if (options.use_room_planes) FindRoomPlanes();
-    if (options.use_room_surface && !map.surface.empty()) surface = RoomSurfaceIndex(map.surface);
+    if (options.use_room_surface && !map.surface.empty() &&
+        (options.room_surface_with_corrected_depth || map.depth_correction.IsIdentity())) {
+      surface = RoomSurfaceIndex(map.surface);
+    }
     if (!planes.empty() || !surface.empty()) MakeDepthGrid();
   }
 

@@ -122,6 +122,14 @@ struct CameraLocalizerOptions {
   /// (A surface the map placed a few centimetres off, a wall far from the
   /// couch, would otherwise pull a well-held camera.)
   double room_surface_sigma_m = 0.002;
+  /// Also when the plan found the depth biased and removed a correction
+  /// (RoomMap::depth_correction): what such a correction leaves is not
+  /// known to the millimetre the surface needs, and on simulated cases with
+  /// a depth scale error of 0.5-0.6 % the surface moved the camera by about
+  /// 1 mm (camera error at the isocentre over 6 such sequences 1.27 mm
+  /// without the surface, 1.55 mm with it; 1.46 -> 1.38 mm on the 4 random
+  /// sequences whose depth agreed, 5.18 -> 3.55 mm on 4 d435 sequences).
+  bool room_surface_with_corrected_depth = false;
   double room_surface_min_incidence = 0.25;
   int room_surface_min_samples = 20;
   double room_surface_max_effective = 25;

@@ -63,7 +63,8 @@ std::string RoomSurfaceOptions::Validate() const {
 std::string RoomSurfaceReport::ToText() const {
   return StringPrintf("room surface: %d points (flat voxels of %d seen in enough frames), from %d depth samples "
                       "in %d frames, %.2f s",
-                      flat_voxels, voxels, samples, frames, seconds);
+                      flat_voxels, voxels, samples, frames, seconds) +
+         (note.empty() ? "" : "; " + note);
 }
 
 namespace {

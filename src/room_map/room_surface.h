@@ -82,6 +82,7 @@ struct RoomSurfaceReport {
   int voxels = 0;          ///< voxels seen in at least min_frames frames
   int flat_voxels = 0;     ///< of them, flat: the surface's points
   double seconds = 0;
+  std::string note;  ///< appended to the line (e.g. how localisation uses it)
   std::string ToText() const;
 };
 
