@@ -300,7 +300,7 @@ struct CameraLocalizer::Impl {
         }
       }
       if (taken || surface.empty()) continue;
-      const int s = surface.Nearest(x);
+      const int s = surface.Near(x);
       if (s < 0) continue;
       const Eigen::Vector3d& n = surface.normal(s);
       const double residual = n.dot(x - surface.point(s));

@@ -39,11 +39,16 @@ std::string RoomSurface::Validate() const {
         out << "room surface normal " << i << " is not a unit vector (length " << normals[i].norm() << ")";
         break;
       }
-      if (points[i].cwiseAbs().maxCoeff() > 1000.f) {
-        out << "room surface point " << i << " is more than 1 km from the origin";
+      if (points[i].cwiseAbs().maxCoeff() > 100.f) {
+        out << "room surface point " << i << " is more than 100 m from the origin";
         break;
       }
     }
+  }
+  if (out.str().empty() && !points.empty()) {
+    Eigen::Vector3f lo = points[0], hi = points[0];
+    for (const auto& p : points) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+    if ((hi - lo).maxCoeff() > 20.f) out << "room surface spans " << (hi - lo).maxCoeff() << " m (more than 20 m)";
   }
   return out.str();
 }
@@ -233,38 +238,59 @@ RoomSurface BuildRoomSurface(const Sequence& sequence, const CameraIntrinsics& K
 
 RoomSurfaceIndex::RoomSurfaceIndex(const RoomSurface& surface) {
   if (surface.empty() || !(surface.voxel_m > 0)) return;
-  inv_voxel_ = 1.0 / surface.voxel_m;
+  const double voxel = surface.voxel_m;
+  inv_voxel_ = 1.0 / voxel;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
   points_.reserve(surface.size());
   normals_.reserve(surface.size());
   for (size_t i = 0; i < surface.size(); ++i) {
     points_.push_back(surface.points[i].cast<double>());
     normals_.push_back(surface.normals[i].cast<double>());
-    const Eigen::Vector3i v = VoxelOf(points_.back(), inv_voxel_);
-    cells_[RoomVoxelKey(v.x(), v.y(), v.z())].push_back(static_cast<int>(i));
+    lo = lo.cwiseMin(points_.back());
+    hi = hi.cwiseMax(points_.back());
   }
-}
-
-int RoomSurfaceIndex::Nearest(const Eigen::Vector3d& x) const {
-  if (cells_.empty()) return -1;
-  const Eigen::Vector3i v = VoxelOf(x, inv_voxel_);
-  int best = -1;
-  double best_d2 = std::numeric_limits<double>::infinity();
-  for (int di = -1; di <= 1; ++di) {
-    for (int dj = -1; dj <= 1; ++dj) {
-      for (int dk = -1; dk <= 1; ++dk) {
-        const auto it = cells_.find(RoomVoxelKey(v.x() + di, v.y() + dj, v.z() + dk));
-        if (it == cells_.end()) continue;
-        for (int i : it->second) {
-          const double d2 = (points_[i] - x).squaredNorm();
-          if (d2 < best_d2) {
-            best_d2 = d2;
-            best = i;
+  // One cell of margin all round: a query beside the surface finds it.
+  origin_ = lo - Eigen::Vector3d::Constant(2 * voxel);
+  for (int a = 0; a < 3; ++a) size_(a) = static_cast<int>(std::ceil((hi(a) - origin_(a)) * inv_voxel_)) + 3;
+  // A surface near the couch spans a few metres (about a million cells);
+  // one far larger is no room surface to index (RoomSurface::Validate
+  // refuses it when read from a store): left unused.
+  if (static_cast<double>(size_.x()) * size_.y() * size_.z() > 64e6) {
+    points_.clear();
+    normals_.clear();
+    return;
+  }
+  cell_point_.assign(static_cast<size_t>(size_.x()) * size_.y() * size_.z(), -1);
+  std::vector<float> best(cell_point_.size(), std::numeric_limits<float>::infinity());
+  for (size_t i = 0; i < points_.size(); ++i) {
+    const Eigen::Vector3d g = (points_[i] - origin_) * inv_voxel_;
+    const int ci = static_cast<int>(std::floor(g.x())), cj = static_cast<int>(std::floor(g.y())),
+              ck = static_cast<int>(std::floor(g.z()));
+    for (int k = ck - 1; k <= ck + 1; ++k) {
+      for (int j = cj - 1; j <= cj + 1; ++j) {
+        for (int c = ci - 1; c <= ci + 1; ++c) {
+          if (c < 0 || j < 0 || k < 0 || c >= size_.x() || j >= size_.y() || k >= size_.z()) continue;
+          const size_t cell = (static_cast<size_t>(k) * size_.y() + j) * size_.x() + c;
+          const Eigen::Vector3d centre = origin_ + (Eigen::Vector3d(c, j, k) + Eigen::Vector3d::Constant(0.5)) * voxel;
+          const float d2 = static_cast<float>((points_[i] - centre).squaredNorm());
+          if (d2 < best[cell]) {
+            best[cell] = d2;
+            cell_point_[cell] = static_cast<int>(i);
           }
         }
       }
     }
   }
-  return best;
+}
+
+int RoomSurfaceIndex::Near(const Eigen::Vector3d& x) const {
+  if (cell_point_.empty()) return -1;
+  const Eigen::Vector3d g = (x - origin_) * inv_voxel_;
+  if (!(g.minCoeff() >= 0)) return -1;
+  const int c = static_cast<int>(g.x()), j = static_cast<int>(g.y()), k = static_cast<int>(g.z());
+  if (c >= size_.x() || j >= size_.y() || k >= size_.z()) return -1;
+  return cell_point_[(static_cast<size_t>(k) * size_.y() + j) * size_.x() + c];
 }
 
 }  // namespace arpos

@@ -98,22 +98,27 @@ RoomSurface BuildRoomSurface(const Sequence& sequence, const CameraIntrinsics& i
                              const Eigen::Vector3d& centre, const RoomSurfaceOptions& options,
                              RoomSurfaceReport* report = nullptr);
 
-/// Nearest-point lookup on a surface's voxel grid.
+/// Constant-time lookup of a surface point near a room point: a dense grid
+/// of the surface's voxels over its bounding box, each cell holding the
+/// surface point nearest to its centre among those in the 27 cells about
+/// it. For a point-to-plane match any point of the same face serves: the
+/// residual does not change along the face.
 class RoomSurfaceIndex {
  public:
   RoomSurfaceIndex() = default;
   explicit RoomSurfaceIndex(const RoomSurface& surface);
-  bool empty() const { return cells_.empty(); }
-  /// The surface point nearest to `x` among those in the 27 voxels about
-  /// x's voxel, or -1 when there is none.
-  int Nearest(const Eigen::Vector3d& x) const;
+  bool empty() const { return points_.empty(); }
+  /// A surface point within about 1.5 voxels of `x`, or -1 when there is none.
+  int Near(const Eigen::Vector3d& x) const;
   const Eigen::Vector3d& point(int i) const { return points_[i]; }
   const Eigen::Vector3d& normal(int i) const { return normals_[i]; }
 
  private:
   double inv_voxel_ = 0;
+  Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();  ///< corner of cell (0, 0, 0)
+  Eigen::Vector3i size_ = Eigen::Vector3i::Zero();
   std::vector<Eigen::Vector3d> points_, normals_;
-  std::unordered_map<std::uint64_t, std::vector<int>> cells_;
+  std::vector<int> cell_point_;  ///< per cell, -1: none
 };
 
 /// Key of the voxel (i, j, k) on a grid (21 bits a coordinate, offset so

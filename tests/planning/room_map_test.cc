@@ -71,6 +71,40 @@ TEST(Keypoints, NearestTwoKeepsTheSmallestTwoDistancesWhateverTheOrder) {
   EXPECT_EQ(one.d2, 257);  // no second: the ratio test cannot reject
 }
 
+// The surface index finds a point of the face near a query beside it, and
+// nothing away from every face; a surface spanning more than a room is
+// refused when checked.
+TEST(RoomSurface, TheIndexFindsTheFaceNearAPointAndNothingAwayFromIt) {
+  RoomSurface surface;
+  surface.voxel_m = 0.03;
+  for (int i = 0; i < 40; ++i) {
+    for (int j = 0; j < 30; ++j) {
+      surface.points.emplace_back(0.5f, 0.9f + 0.03f * i, 0.015f + 0.03f * j);  // a couch-base face, x = 0.5
+      surface.normals.emplace_back(1.f, 0.f, 0.f);
+    }
+  }
+  EXPECT_EQ(surface.Validate(), "");
+  const RoomSurfaceIndex index(surface);
+  ASSERT_FALSE(index.empty());
+  for (const double dx : {-0.02, 0.0, 0.01, 0.03}) {
+    const Eigen::Vector3d q(0.5 + dx, 1.3, 0.41);
+    const int k = index.Near(q);
+    ASSERT_GE(k, 0) << dx;
+    EXPECT_NEAR(index.normal(k).dot(q - index.point(k)), dx, 1e-6) << dx;
+    EXPECT_LT((index.point(k) - q).norm(), 0.06) << dx;
+  }
+  EXPECT_EQ(index.Near(Eigen::Vector3d(0.7, 1.3, 0.4)), -1);   // 20 cm off the face
+  EXPECT_EQ(index.Near(Eigen::Vector3d(0.5, 5.0, 0.4)), -1);   // beyond its end
+  EXPECT_EQ(index.Near(Eigen::Vector3d(-50, 1.3, 0.4)), -1);   // outside the grid
+  EXPECT_EQ(RoomSurfaceIndex().Near(Eigen::Vector3d::Zero()), -1);
+
+  surface.points.back() = Eigen::Vector3f(30.f, 0.f, 0.f);
+  EXPECT_NE(surface.Validate().find("spans"), std::string::npos) << surface.Validate();
+  surface.points.back() = Eigen::Vector3f(0.5f, 1.f, 0.5f);
+  surface.normals.back() = Eigen::Vector3f(0.f, 0.f, 0.f);
+  EXPECT_NE(surface.Validate().find("not a unit vector"), std::string::npos) << surface.Validate();
+}
+
 TEST(RoomMap, MarkerCornersAreNearTheTruth) {
   const auto& c = GetSmallCase();
   const RoomMapBuildResult& built = GetSmallCaseMap();
