@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <unordered_map>
 
 #include <Eigen/Eigenvalues>
 #include <opencv2/calib3d.hpp>
@@ -14,7 +16,10 @@
 #include "util/string_util.h"
 
 namespace arpos {
+namespace {
 
+// Key of the voxel (i, j, k) on a grid (21 bits a coordinate, offset so
+// negative indices work).
 std::uint64_t RoomVoxelKey(int i, int j, int k) {
   constexpr std::uint64_t kMask = (1u << 21) - 1;
   constexpr int kOffset = 1 << 20;
@@ -22,6 +27,8 @@ std::uint64_t RoomVoxelKey(int i, int j, int k) {
          ((static_cast<std::uint64_t>(j + kOffset) & kMask) << 21) |
          (static_cast<std::uint64_t>(k + kOffset) & kMask);
 }
+
+}  // namespace
 
 std::string RoomSurface::Validate() const {
   std::ostringstream out;

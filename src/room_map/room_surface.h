@@ -18,10 +18,8 @@
 // neighbourhood (the voxels within +-1) is flat: edges, corners and clutter
 // give no reliable normal and are left out.
 
-#include <cstdint>
 #include <functional>
 #include <string>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -43,7 +41,8 @@ struct RoomSurface {
   bool empty() const { return points.empty(); }
   size_t size() const { return points.size(); }
   /// Empty if consistent, else what is wrong (sizes match, finite, unit
-  /// normals, a positive voxel size when there are points).
+  /// normals, a positive voxel size when there are points, within 100 m of
+  /// the origin and 20 m across).
   std::string Validate() const;
 };
 
@@ -53,7 +52,7 @@ struct RoomSurfaceOptions {
   /// (the couch base, the floor about it, the gantry's face), where the
   /// map's cameras are best placed. Measured on simulated cases: a wall
   /// 2.2-2.5 m from the couch point that the map had placed about 2 cm off
-  /// pulled keypoint-only frames 15-37 mm off with 2.5 m; 1.0, 1.5 and
+  /// pulled keypoint-only frames 13-37 mm off with 2.5 m; 1.0, 1.5 and
   /// 2.0 m gave the same poses there.
   double radius_m = 1.5;
   /// Depth samples across the image per frame (a grid; more rows follow
@@ -120,9 +119,5 @@ class RoomSurfaceIndex {
   std::vector<Eigen::Vector3d> points_, normals_;
   std::vector<int> cell_point_;  ///< per cell, -1: none
 };
-
-/// Key of the voxel (i, j, k) on a grid (21 bits a coordinate, offset so
-/// negative indices work).
-std::uint64_t RoomVoxelKey(int i, int j, int k);
 
 }  // namespace arpos
