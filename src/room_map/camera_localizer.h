@@ -109,8 +109,9 @@ struct CameraLocalizerOptions {
   double room_plane_max_effective = 25;
   /// The room's still surface in depth (the map's RoomSurface, kept by the
   /// planning stage): the same grid's pixels that no plane took, put in the
-  /// room by the first refinement, matched to the nearest surface point
-  /// within room_surface_gate_m (or 3 sigma(z)) along its normal, seen at
+  /// room by the first refinement, matched to a surface point near it
+  /// (RoomSurfaceIndex) within room_surface_gate_m (or 3 sigma(z)) along
+  /// its normal, seen at
   /// least room_surface_min_incidence (cosine) face-on. The samples are
   /// grouped by their normal's main room axis; a group counts as at most
   /// room_surface_max_effective independent samples.
@@ -119,8 +120,9 @@ struct CameraLocalizerOptions {
   /// A sample is used only when its distance from the surface agrees with
   /// the first refinement's pose within 3 sigma: its depth noise, the pose's
   /// own uncertainty there, and this much error of the surface's placement.
-  /// (A surface the map placed a few centimetres off, a wall far from the
-  /// couch, would otherwise pull a well-held camera.)
+  /// (This keeps out what disagrees with a well-held pose; where the pose is
+  /// itself weak, a surface the map placed centimetres off passes, which is
+  /// why the plan keeps the surface near the couch only: RoomSurfaceOptions.)
   double room_surface_sigma_m = 0.002;
   /// Also when the plan found the depth biased and removed a correction
   /// (RoomMap::depth_correction): what such a correction leaves is not
