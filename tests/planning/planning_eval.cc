@@ -18,8 +18,8 @@
 // NO_FILTER=1 (no constant-velocity filter), NO_PRIOR=1 (no motion prior at all),
 // TRUTH_START=1 (every frame relocalised from its true pose), TILT_GATE_ONLY=1 (the
 // origin's tilt fused with its coplanar markers only when the tilt itself is weak),
-// NO_SURFACE=1 (the localiser without the room's surface), SURF_FLAT, SURF_VOXEL,
-// SURF_RADIUS (surface option overrides), SURF_XYZ=FILE (the surface's points
+// NO_SURFACE=1 (the localiser without the room's surface), SURF_MAXEFF, SURF_GATE, SURF_FLAT, SURF_VOXEL,
+// SURF_RADIUS (surface option overrides), SURF_KEEP_RADIUS=M (only the stored surface within M of the couch point), SURF_XYZ=FILE (the surface's points
 // and normals written one a line).
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
