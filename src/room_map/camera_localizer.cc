@@ -175,9 +175,8 @@ struct CameraLocalizer::Impl {
     std::vector<Eigen::Vector3d> marker_centres;
   };
   std::vector<RoomPlane> planes;
-  // Ideal rays of the plane sample grid, (x, y) of (x, y, 1), and their pixels.
-  std::vector<Eigen::Vector2d> plane_grid_ray;
-  std::vector<cv::Point> plane_grid_px;
+  // Where the planes' and the surface's depth is read.
+  DepthSampleGrid depth_grid;
   // The map's still surface (empty: not used).
   RoomSurfaceIndex surface;
   // Depth samples the last AddRoomDepths matched.
@@ -195,7 +194,11 @@ struct CameraLocalizer::Impl {
         (options.room_surface_with_corrected_depth || map.depth_correction.IsIdentity())) {
       surface = RoomSurfaceIndex(map.surface);
     }
-    if (!planes.empty() || !surface.empty()) MakeDepthGrid();
+    // About 80 depth samples across the image whatever its size (a
+    // plane's, or a surface group's, count as 25 at most anyway).
+    if (!planes.empty() || !surface.empty()) {
+      depth_grid = MakeDepthSampleGrid(K, std::max(options.room_plane_step_px, K.width / 80));
+    }
   }
 
   // Groups the map's markers by plane (normals within 3 deg, centres within
@@ -242,26 +245,6 @@ struct CameraLocalizer::Impl {
     }
   }
 
-  // The depth sample grid of the planes and the surface.
-  void MakeDepthGrid() {
-    // About 80 samples across the image whatever its size (the samples of
-    // a plane count as room_plane_max_effective at most anyway).
-    const int step = std::max(options.room_plane_step_px, K.width / 80);
-    std::vector<cv::Point2d> px, ideal;
-    for (int v = step / 2; v < K.height; v += step) {
-      for (int u = step / 2; u < K.width; u += step) {
-        px.emplace_back(u, v);
-        plane_grid_px.emplace_back(u, v);
-      }
-    }
-    if (distortion) {
-      cv::undistortPoints(px, ideal, K.CvK(), K.CvDistortion());
-      for (const auto& p : ideal) plane_grid_ray.emplace_back(p.x, p.y);
-    } else {
-      for (const auto& p : px) plane_grid_ray.emplace_back((p.x - K.cx) / K.fx, (p.y - K.cy) / K.fy);
-    }
-  }
-
   // Depth pixels on the map's planes and its surface at `camera_from_room`
   // (the first refinement's pose), added to corr as plane-depth terms.
   void AddRoomDepths(const Rigid3d& camera_from_room, const Mat6* pose_cov) {
@@ -281,11 +264,11 @@ struct CameraLocalizer::Impl {
     };
     std::array<std::vector<SurfaceSample>, 3> on_surface;
     const double support2 = options.room_plane_support_m * options.room_plane_support_m;
-    for (size_t i = 0; i < plane_grid_ray.size(); ++i) {
-      const uint16_t raw = depth_image->at<uint16_t>(plane_grid_px[i]);
+    for (size_t i = 0; i < depth_grid.ray.size(); ++i) {
+      const uint16_t raw = depth_image->at<uint16_t>(depth_grid.px[i]);
       if (raw == 0) continue;
       const double z = raw / K.depth_scale;  // as the marker depth samples read it
-      const Eigen::Vector3d xc(plane_grid_ray[i].x() * z, plane_grid_ray[i].y() * z, z);
+      const Eigen::Vector3d xc(depth_grid.ray[i].x() * z, depth_grid.ray[i].y() * z, z);
       const Eigen::Vector3d x = room_from_camera * xc;
       const double gate = std::max(options.room_plane_gate_m, 3 * DepthSigma(z));
       bool taken = false;
@@ -329,7 +312,7 @@ struct CameraLocalizer::Impl {
       const double share = std::sqrt(std::max(1.0, group.size() / options.room_surface_max_effective));
       surface_samples_used += static_cast<int>(group.size());
       for (const SurfaceSample& g : group) {
-        corr.AddPlaneDepth(surface.point(g.point), surface.normal(g.point), plane_grid_ray[g.ray], g.z,
+        corr.AddPlaneDepth(surface.point(g.point), surface.normal(g.point), depth_grid.ray[g.ray], g.z,
                            DepthSigma(g.z) * share);
       }
     }
@@ -369,7 +352,7 @@ struct CameraLocalizer::Impl {
       const Eigen::Vector3d point = planes[p].normal * planes[p].offset;
       plane_samples_used += static_cast<int>(kept.size());
       for (const Sample* s : kept) {
-        corr.AddPlaneDepth(point, planes[p].normal, plane_grid_ray[s->ray], s->z, DepthSigma(s->z) * share);
+        corr.AddPlaneDepth(point, planes[p].normal, depth_grid.ray[s->ray], s->z, DepthSigma(s->z) * share);
       }
     }
   }

@@ -99,6 +99,24 @@ Eigen::Vector3i VoxelOf(const Eigen::Vector3d& x, double inv_voxel) {
 
 }  // namespace
 
+DepthSampleGrid MakeDepthSampleGrid(const CameraIntrinsics& K, int step) {
+  DepthSampleGrid grid;
+  std::vector<cv::Point2d> px, ideal;
+  for (int v = step / 2; v < K.height; v += step) {
+    for (int u = step / 2; u < K.width; u += step) {
+      px.emplace_back(u, v);
+      grid.px.emplace_back(u, v);
+    }
+  }
+  if (K.HasDistortion() && !px.empty()) {
+    cv::undistortPoints(px, ideal, K.CvK(), K.CvDistortion());
+    for (const auto& p : ideal) grid.ray.emplace_back(p.x, p.y);
+  } else {
+    for (const auto& p : px) grid.ray.emplace_back((p.x - K.cx) / K.fx, (p.y - K.cy) / K.fy);
+  }
+  return grid;
+}
+
 RoomSurface BuildRoomSurface(const Sequence& sequence, const CameraIntrinsics& K, const DepthCorrection& correction,
                              const std::vector<std::pair<int, Rigid3d>>& room_from_camera,
                              const std::function<bool(const Eigen::Vector3d&)>& keep,
@@ -112,23 +130,9 @@ RoomSurface BuildRoomSurface(const Sequence& sequence, const CameraIntrinsics& K
   surface.voxel_m = options.voxel_m;
   if (room_from_camera.empty() || K.width <= 0 || K.height <= 0) return surface;
 
-  // The sample grid's pixels and their rays (x, y of (x, y, 1)).
-  const int step = std::max(1, K.width / options.samples_across);
-  std::vector<cv::Point> px;
-  std::vector<cv::Point2d> pxd, ideal;
-  for (int v = step / 2; v < K.height; v += step) {
-    for (int u = step / 2; u < K.width; u += step) {
-      px.emplace_back(u, v);
-      pxd.emplace_back(u, v);
-    }
-  }
-  std::vector<Eigen::Vector2d> ray(px.size());
-  if (K.HasDistortion()) {
-    cv::undistortPoints(pxd, ideal, K.CvK(), K.CvDistortion());
-    for (size_t i = 0; i < px.size(); ++i) ray[i] = Eigen::Vector2d(ideal[i].x, ideal[i].y);
-  } else {
-    for (size_t i = 0; i < px.size(); ++i) ray[i] = Eigen::Vector2d((px[i].x - K.cx) / K.fx, (px[i].y - K.cy) / K.fy);
-  }
+  const DepthSampleGrid grid = MakeDepthSampleGrid(K, std::max(1, K.width / options.samples_across));
+  const std::vector<cv::Point>& px = grid.px;
+  const std::vector<Eigen::Vector2d>& ray = grid.ray;
   // The depth correction reads the pixel's position without the lens, as
   // CorrectDepthImage does.
   std::vector<Eigen::Vector2d> plain(px.size());
@@ -257,7 +261,7 @@ RoomSurfaceIndex::RoomSurfaceIndex(const RoomSurface& surface) {
     lo = lo.cwiseMin(points_.back());
     hi = hi.cwiseMax(points_.back());
   }
-  // One cell of margin all round: a query beside the surface finds it.
+  // Two cells of margin all round: a query beside the surface finds it.
   origin_ = lo - Eigen::Vector3d::Constant(2 * voxel);
   for (int a = 0; a < 3; ++a) size_(a) = static_cast<int>(std::ceil((hi(a) - origin_(a)) * inv_voxel_)) + 3;
   // A surface near the couch spans a few metres (about a million cells);

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <opencv2/core.hpp>
 
 #include "geometry/rigid3.h"
 #include "sensor/depth_correction.h"
@@ -84,6 +85,16 @@ struct RoomSurfaceReport {
   std::string note;  ///< appended to the line (e.g. how localisation uses it)
   std::string ToText() const;
 };
+
+/// Pixels on a grid every `step` px (the first at step / 2) and their ideal
+/// rays, (x, y) of (x, y, 1), through the lens when the intrinsics have one:
+/// where the surface is gathered and where the localiser reads the room's
+/// depth.
+struct DepthSampleGrid {
+  std::vector<cv::Point> px;
+  std::vector<Eigen::Vector2d> ray;
+};
+DepthSampleGrid MakeDepthSampleGrid(const CameraIntrinsics& intrinsics, int step);
 
 /// Gathers the surface from the depth of `sequence`'s frames at the given
 /// camera poses (sequence index, room_from_camera), with `correction`
