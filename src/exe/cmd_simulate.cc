@@ -30,6 +30,9 @@ const char kUsage[] =
     "  --tracking-sequences K      number of tracking sequences (default 2)\n"
     "  --room-walk full|couch      planning walk: the couch and every wall (default),\n"
     "                              or around the couch only (small cases)\n"
+    "  --room-texture rich|plain   the room's surfaces: posters, signs and clutter\n"
+    "                              (default), or plain paint, tile seams and the\n"
+    "                              gantry's panels (few keypoints)\n"
     "  --no-noise                  exact renders: no blur, noise or depth dropouts\n"
     "  --body-mesh PATH            MakeHuman base.obj (default: $ARPOS_BODY_MESH or the\n"
     "                              shared data copy)\n"
@@ -98,7 +101,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
       }
     }
     const Args args(argv,
-                    {"profile", "seed", "frames", "tracking-sequences", "room-walk", "body-mesh",
+                    {"profile", "seed", "frames", "tracking-sequences", "room-walk", "room-texture", "body-mesh",
                      "png-compression", "supersampling", "response", "depth-scale-error",
                      "depth-field-mm", "breathing-mm", "distortion", "dictionary", "sticker-size-m"},
                     {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
@@ -116,6 +119,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     if (auto frames = args.Get("frames")) ParseFrames(*frames, &options);
     options.tracking_sequences = static_cast<int>(args.GetInt("tracking-sequences", 2));
     options.room_walk = args.GetOr("room-walk", "full");
+    options.room_texture = args.GetOr("room-texture", "rich");
     if (auto mesh = args.Get("body-mesh")) options.body_mesh_path = *mesh;
     options.png_compression = static_cast<int>(args.GetInt("png-compression", 1));
     options.supersampling = static_cast<int>(args.GetInt("supersampling", 0));

@@ -119,6 +119,7 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
       << "noise: " << (t.noise ? "true" : "false") << "\n"
       << "hard: " << (t.hard ? "true" : "false") << "\n"
       << "room_walk: " << t.room_walk << "\n"
+      << "room_texture: " << t.room_texture << "\n"
       << "frames: {room: " << t.room_frames << ", body_scan: " << t.body_scan_frames
       << ", tracking: " << t.tracking_frames << ", tracking_sequences: " << t.tracking_sequences
       << "}\n"
@@ -232,6 +233,7 @@ SimulationTruth LoadSimulationTruth(const std::filesystem::path& path) {
   t.noise = r.As<bool>(r.Need(root, "noise", ""), "noise");
   t.hard = r.As<bool>(r.Need(root, "hard", ""), "hard");
   if (const YAML::Node walk = root["room_walk"]) t.room_walk = r.As<std::string>(walk, "room_walk");
+  if (const YAML::Node tex = root["room_texture"]) t.room_texture = r.As<std::string>(tex, "room_texture");
   const YAML::Node frames = r.Need(root, "frames", "");
   t.room_frames = r.As<int>(r.Need(frames, "room", "frames."), "frames.room");
   t.body_scan_frames = r.As<int>(r.Need(frames, "body_scan", "frames."), "frames.body_scan");

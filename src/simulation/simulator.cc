@@ -98,6 +98,9 @@ std::string SimulationOptions::Check() const {
   }
   if (tracking_sequences < 0 || tracking_sequences > 99) return "tracking-sequences: must be 0..99";
   if (room_walk != "full" && room_walk != "couch") return "room-walk: must be full or couch, got " + room_walk;
+  if (room_texture != "rich" && room_texture != "plain") {
+    return "room-texture: must be rich or plain, got " + room_texture;
+  }
   if (png_compression < 0 || png_compression > 9) return "png-compression: must be 0..9";
   if (supersampling != 0 && supersampling != 1 && supersampling != 3 && supersampling != 5) {
     return "supersampling: must be 1, 3 or 5 (or 0 for the profile's)";
@@ -198,6 +201,7 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   wo.seed = options_.seed;
   wo.dictionary = ArucoDictionaryId(options_.dictionary);
   wo.body_marker_size_m = options_.sticker_size_m;
+  wo.plain_room = options_.room_texture == "plain";
   wo.body_mesh_path =
       options_.body_mesh_path.empty() ? DefaultBodyMeshPath() : options_.body_mesh_path;
   random_conditions_ = options_.random_conditions;
@@ -812,6 +816,7 @@ SimulationTruth Simulator::Truth() const {
   t.noise = options_.noise;
   t.hard = options_.hard;
   t.room_walk = random_conditions_ ? conditions_.room_walk : options_.room_walk;
+  t.room_texture = options_.room_texture;
   t.room_frames = options_.room_frames;
   t.body_scan_frames = options_.body_scan_frames;
   t.tracking_frames = options_.tracking_frames;

@@ -69,6 +69,10 @@ struct SimulationOptions {
   /// the couch only, looking at the floor markers and the couch; the quick
   /// walk a small case of few room frames needs).
   std::string room_walk = "full";
+  /// The room's surfaces: "rich" (posters, signs, scattered shapes: many
+  /// keypoints) or "plain" (low-contrast paint, tile seams, the gantry's
+  /// panels: few keypoints). textures.h, TextureDetail.
+  std::string room_texture = "rich";
   /// MakeHuman base.obj; empty = DefaultBodyMeshPath().
   std::filesystem::path body_mesh_path;
   int png_compression = 1;  ///< 0..9 (cv::IMWRITE_PNG_COMPRESSION); 1: fast, 3 % larger than 9

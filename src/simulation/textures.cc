@@ -188,8 +188,11 @@ MarkerArtwork MakeMarkerArtwork(int dictionary_id, int marker_id, int quiet_cell
 }
 
 Texture MakeSurfaceTexture(SurfaceStyle style, double width_m, double height_m, double texel_m,
-                           uint64_t seed) {
+                           uint64_t seed, TextureDetail detail) {
   Rng rng(seed);
+  const bool rich = detail == TextureDetail::kRich;
+  // Plain surfaces: a quarter of the mottling's contrast, nothing scattered.
+  const float contrast = rich ? 1.0f : 0.25f;
   const int w = std::max(8, static_cast<int>(std::lround(width_m / texel_m)));
   const int h = std::max(8, static_cast<int>(std::lround(height_m / texel_m)));
   const double px_per_m = 1.0 / texel_m;
@@ -199,10 +202,11 @@ Texture MakeSurfaceTexture(SurfaceStyle style, double width_m, double height_m, 
       // Speckled vinyl: large-scale mottling, fine speckle, tile seams, a few
       // scuffs and one or two floor signs.
       cv::Mat noise = FractalNoise(w, h, 0.6 * px_per_m, 0.75, &rng);
-      img = ColorizeNoise(noise, cv::Vec3f(150, 158, 160), cv::Vec3f(70, 66, 60));
+      img = ColorizeNoise(noise, cv::Vec3f(150, 158, 160), contrast * cv::Vec3f(70, 66, 60));
       const int tile = static_cast<int>(0.6 * px_per_m);
       for (int x = tile; x < w; x += tile) cv::line(img, {x, 0}, {x, h}, cv::Scalar(95, 100, 104), 2);
       for (int y = tile; y < h; y += tile) cv::line(img, {0, y}, {w, y}, cv::Scalar(95, 100, 104), 2);
+      if (!rich) break;
       ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 25), 2,
                     static_cast<int>(0.03 * px_per_m), 80, 170);
       for (int i = 0; i < 2; ++i) {
@@ -213,10 +217,12 @@ Texture MakeSurfaceTexture(SurfaceStyle style, double width_m, double height_m, 
     }
     case SurfaceStyle::kWall: {
       cv::Mat noise = FractalNoise(w, h, 0.8 * px_per_m, 0.55, &rng);
-      img = ColorizeNoise(noise, cv::Vec3f(196, 204, 208), cv::Vec3f(50, 46, 44));
-      ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 8), 4,
-                    static_cast<int>(0.05 * px_per_m), 120, 200);
-      const int posters = static_cast<int>(width_m * height_m * 0.5) + 2;
+      img = ColorizeNoise(noise, cv::Vec3f(196, 204, 208), contrast * cv::Vec3f(50, 46, 44));
+      if (rich) {
+        ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 8), 4,
+                      static_cast<int>(0.05 * px_per_m), 120, 200);
+      }
+      const int posters = rich ? static_cast<int>(width_m * height_m * 0.5) + 2 : 0;
       for (int i = 0; i < posters; ++i) {
         const int pw = static_cast<int>(rng.Uniform(0.3, 0.8) * px_per_m);
         const int ph = static_cast<int>(rng.Uniform(0.3, 0.7) * px_per_m);
@@ -231,10 +237,11 @@ Texture MakeSurfaceTexture(SurfaceStyle style, double width_m, double height_m, 
     }
     case SurfaceStyle::kCeiling: {
       cv::Mat noise = FractalNoise(w, h, 0.5 * px_per_m, 0.5, &rng);
-      img = ColorizeNoise(noise, cv::Vec3f(220, 222, 222), cv::Vec3f(20, 20, 20));
+      img = ColorizeNoise(noise, cv::Vec3f(220, 222, 222), contrast * cv::Vec3f(20, 20, 20));
       const int tile = static_cast<int>(0.6 * px_per_m);
       for (int x = 0; x < w; x += tile) cv::line(img, {x, 0}, {x, h}, cv::Scalar(150, 150, 150), 2);
       for (int y = 0; y < h; y += tile) cv::line(img, {0, y}, {w, y}, cv::Scalar(150, 150, 150), 2);
+      if (!rich) break;
       ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 4), 3, 20, 150, 200);
       break;
     }
@@ -256,21 +263,22 @@ Texture MakeSurfaceTexture(SurfaceStyle style, double width_m, double height_m, 
     }
     case SurfaceStyle::kCouchBase: {
       cv::Mat noise = FractalNoise(w, h, 0.3 * px_per_m, 0.5, &rng);
-      img = ColorizeNoise(noise, cv::Vec3f(175, 170, 160), cv::Vec3f(30, 30, 30));
+      img = ColorizeNoise(noise, cv::Vec3f(175, 170, 160), contrast * cv::Vec3f(30, 30, 30));
+      if (!rich) break;
       ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 20), 3, 25, 100, 190);
       DrawText(&img, &rng, cv::Point(10, h / 2), 1.0, cv::Scalar(60, 60, 60));
       break;
     }
     case SurfaceStyle::kGantry: {
       cv::Mat noise = FractalNoise(w, h, 0.5 * px_per_m, 0.5, &rng);
-      img = ColorizeNoise(noise, cv::Vec3f(215, 215, 210), cv::Vec3f(18, 18, 18));
-      for (int i = 0; i < 12; ++i) {
+      img = ColorizeNoise(noise, cv::Vec3f(215, 215, 210), contrast * cv::Vec3f(18, 18, 18));
+      for (int i = 0; i < (rich ? 12 : 4); ++i) {
         const cv::Rect r(rng.UniformInt(0, w - 20), rng.UniformInt(0, h - 20),
                          rng.UniformInt(20, w / 3 + 21), rng.UniformInt(20, h / 4 + 21));
         cv::rectangle(img, r, cv::Scalar(120, 120, 120), 2, cv::LINE_AA);
       }
-      ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 6), 4, 30, 120, 200);
-      for (int i = 0; i < 6; ++i) {
+      if (rich) ScatterShapes(&img, &rng, static_cast<int>(width_m * height_m * 6), 4, 30, 120, 200);
+      for (int i = 0; i < (rich ? 6 : 1); ++i) {
         DrawText(&img, &rng, cv::Point(rng.UniformInt(0, w / 2), rng.UniformInt(20, h)), 1.0,
                  cv::Scalar(140, 90, 40));
       }

@@ -37,11 +37,19 @@ MarkerArtwork MakeMarkerArtwork(int dictionary_id, int marker_id, int quiet_cell
 
 enum class SurfaceStyle { kFloor, kWall, kCeiling, kCouchTop, kCouchBase, kGantry };
 
-/// A feature-rich surface of `width_m` x `height_m` at `texel_m` per texel:
+/// How much a room's surfaces show. kRich: posters, signs, scattered shapes
+/// and strong mottling on every surface (a cluttered room, many keypoints).
+/// kPlain: a painted bunker: low-contrast mottling, the floor's and ceiling's
+/// tile seams, the gantry's panels and one label, nothing scattered, no
+/// posters (few keypoints: the markers and the room's shape must carry).
+enum class TextureDetail { kRich, kPlain };
+
+/// A surface of `width_m` x `height_m` at `texel_m` per texel. Rich:
 /// multi-scale noise plus random shapes, posters and signs (walls), tiles
-/// and scuffs (floor), an indexed carbon-fibre look (couch top). Same seed,
-/// same texture.
+/// and scuffs (floor), an indexed carbon-fibre look (couch top); plain: see
+/// TextureDetail (the couch top, which moves with the patient, stays as it
+/// is). Same seed and detail, same texture.
 Texture MakeSurfaceTexture(SurfaceStyle style, double width_m, double height_m, double texel_m,
-                           uint64_t seed);
+                           uint64_t seed, TextureDetail detail = TextureDetail::kRich);
 
 }  // namespace arpos::sim

@@ -58,9 +58,10 @@ int AddMesh(RenderScene* scene, RenderMesh mesh) {
 // of its size.
 int AddTexturedPlane(RenderScene* scene, const std::string& name, SurfaceStyle style,
                      const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
-                     const Eigen::Vector3d& p2, const Eigen::Vector3d& p3, uint64_t seed) {
+                     const Eigen::Vector3d& p2, const Eigen::Vector3d& p3, uint64_t seed,
+                     TextureDetail detail = TextureDetail::kRich) {
   const double w = (p1 - p0).norm(), h = (p3 - p0).norm();
-  const int tex = AddTexture(scene, MakeSurfaceTexture(style, w, h, kTexelM, seed));
+  const int tex = AddTexture(scene, MakeSurfaceTexture(style, w, h, kTexelM, seed, detail));
   const int mat = AddMaterial(scene, tex, Eigen::Vector3f(1, 1, 1));
   RenderMesh mesh;
   mesh.name = name;
@@ -75,9 +76,10 @@ int AddTexturedPlane(RenderScene* scene, const std::string& name, SurfaceStyle s
 
 // A box with one texture wrapped per face (uv per metre).
 int AddTexturedBox(RenderScene* scene, const std::string& name, SurfaceStyle style,
-                   const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, uint64_t seed) {
+                   const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, uint64_t seed,
+                   TextureDetail detail = TextureDetail::kRich) {
   const double tex_m = 1.0;
-  const int tex = AddTexture(scene, MakeSurfaceTexture(style, tex_m, tex_m, kTexelM, seed));
+  const int tex = AddTexture(scene, MakeSurfaceTexture(style, tex_m, tex_m, kTexelM, seed, detail));
   scene->textures[tex].wrap = true;
   const int mat = AddMaterial(scene, tex, Eigen::Vector3f(1, 1, 1));
   RenderMesh mesh;
@@ -600,6 +602,7 @@ World BuildWorld(const WorldOptions& options) {
   // --- Room ------------------------------------------------------------------
   Rng layout(StreamSeed(options.seed, Stream::kRoomLayout));
   const uint64_t tex_seed = StreamSeed(options.seed, Stream::kRoomTexture);
+  const TextureDetail detail = options.plain_room ? TextureDetail::kPlain : TextureDetail::kRich;
   {
     using V = Eigen::Vector3d;
     const RoomLayout& lay = options.layout;
@@ -607,29 +610,29 @@ World BuildWorld(const WorldOptions& options) {
                  Hd = lay.wall_head_y_m, C = lay.ceiling_z_m;
     world.room_meshes.push_back(AddTexturedPlane(&scene, "floor", SurfaceStyle::kFloor,
                                                  V(L, F, kFloorZ), V(R, F, kFloorZ),
-                                                 V(R, Hd, kFloorZ), V(L, Hd, kFloorZ), tex_seed + 1));
+                                                 V(R, Hd, kFloorZ), V(L, Hd, kFloorZ), tex_seed + 1, detail));
     world.room_meshes.push_back(AddTexturedPlane(&scene, "ceiling", SurfaceStyle::kCeiling,
                                                  V(L, Hd, C), V(R, Hd, C), V(R, F, C), V(L, F, C),
-                                                 tex_seed + 2));
+                                                 tex_seed + 2, detail));
     world.room_meshes.push_back(AddTexturedPlane(&scene, "wall_left", SurfaceStyle::kWall,
                                                  V(L, F, 0), V(L, Hd, 0), V(L, Hd, C), V(L, F, C),
-                                                 tex_seed + 3));
+                                                 tex_seed + 3, detail));
     world.room_meshes.push_back(AddTexturedPlane(&scene, "wall_right", SurfaceStyle::kWall,
                                                  V(R, Hd, 0), V(R, F, 0), V(R, F, C), V(R, Hd, C),
-                                                 tex_seed + 4));
+                                                 tex_seed + 4, detail));
     world.room_meshes.push_back(AddTexturedPlane(&scene, "wall_foot", SurfaceStyle::kWall,
                                                  V(R, F, 0), V(L, F, 0), V(L, F, C), V(R, F, C),
-                                                 tex_seed + 5));
+                                                 tex_seed + 5, detail));
     world.room_meshes.push_back(AddTexturedPlane(&scene, "wall_head", SurfaceStyle::kWall,
                                                  V(L, Hd, 0), V(R, Hd, 0), V(R, Hd, C), V(L, Hd, C),
-                                                 tex_seed + 6));
+                                                 tex_seed + 6, detail));
     // Gantry at the head end and the couch base (static).
     world.room_meshes.push_back(AddTexturedBox(&scene, "gantry", SurfaceStyle::kGantry,
                                                V(kCouchCentreX - 0.9, 3.35, kFloorZ),
-                                               V(kCouchCentreX + 0.9, 4.35, 2.45), tex_seed + 7));
+                                               V(kCouchCentreX + 0.9, 4.35, 2.45), tex_seed + 7, detail));
     world.room_meshes.push_back(AddTexturedBox(&scene, "couch_base", SurfaceStyle::kCouchBase,
                                                V(kCouchCentreX - 0.2, 0.95, kFloorZ),
-                                               V(kCouchCentreX + 0.2, 1.75, 0.72), tex_seed + 8));
+                                               V(kCouchCentreX + 0.2, 1.75, 0.72), tex_seed + 8, detail));
     world.occluders = {
         {V(kCouchCentreX - 0.9, 3.35, kFloorZ), V(kCouchCentreX + 0.9, 4.35, 2.45)},
         {V(kCouchCentreX - 0.2, 0.95, kFloorZ), V(kCouchCentreX + 0.2, 1.75, 0.72)},

@@ -90,6 +90,9 @@ struct WorldOptions {
   std::vector<bool> room_marker_places;
   double room_marker_size_m = 0.15;
   double body_marker_size_m = 0.03;
+  /// The room's walls, floor, ceiling, gantry and couch base with little
+  /// texture (textures.h, TextureDetail::kPlain) instead of a cluttered room.
+  bool plain_room = false;
   /// OpenCV predefined ArUco dictionary (cv::aruco::PREDEFINED_DICTIONARY_NAME)
   /// of every marker: room ids 0-49, stickers 100-199.
   int dictionary = 2;  // DICT_4X4_250

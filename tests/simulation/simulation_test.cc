@@ -14,6 +14,7 @@
 #include <map>
 #include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <set>
@@ -399,6 +400,47 @@ class MeshDistance {
   double cell_;
   std::unordered_map<int64_t, std::vector<int>> grid_;
 };
+
+// A plain room (--room-texture plain) gives a corner detector less than half
+// of what the cluttered default gives (what is left: markers, tile seams,
+// the skirting, the couch top), while its markers read alike: the cases that
+// test the localiser without a textured room.
+TEST(Rendering, APlainRoomShowsFewCornersAndTheSameMarkers) {
+  SimulationOptions o = SmallOptions();
+  o.noise = false;
+  o.room_texture = "plain";
+  const Simulator plain(o);
+  const Simulator& rich = ExactSimulator();
+  // Towards the couch and gantry, and across the room to a side wall.
+  const std::vector<Rigid3d> views = {
+      LookAt(Eigen::Vector3d(1.0, -1.2, 1.5), Eigen::Vector3d(0.8, 2.0, 0.7), 0),
+      LookAt(Eigen::Vector3d(-0.8, 1.0, 1.4), Eigen::Vector3d(3.4, 1.3, 1.1), 0.1)};
+  const cv::Ptr<cv::FastFeatureDetector> fast = cv::FastFeatureDetector::create(20);
+  int corners_rich = 0, corners_plain = 0;
+  for (const Rigid3d& room_from_camera : views) {
+    std::set<int> markers[2];
+    int* counts[2] = {&corners_rich, &corners_plain};
+    const Simulator* sims[2] = {&rich, &plain};
+    for (int k = 0; k < 2; ++k) {
+      const SimulatedFrame frame = sims[k]->RenderView(room_from_camera, std::nullopt, /*noise=*/false);
+      cv::Mat gray;
+      cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+      std::vector<cv::KeyPoint> keypoints;
+      fast->detect(gray, keypoints);
+      *counts[k] += static_cast<int>(keypoints.size());
+      std::vector<std::vector<cv::Point2f>> corners;
+      std::vector<int> ids;
+      cv::aruco::detectMarkers(gray, Dictionary(), corners, ids);
+      markers[k].insert(ids.begin(), ids.end());
+    }
+    EXPECT_FALSE(markers[0].empty());
+    EXPECT_EQ(markers[0], markers[1]);
+  }
+  std::printf("FAST corners in %zu views: rich room %d, plain room %d\n", views.size(), corners_rich,
+              corners_plain);
+  EXPECT_GT(corners_rich, 1000);
+  EXPECT_LT(corners_plain, corners_rich / 2);
+}
 
 TEST(Depth, BodyPixelsBackProjectOntoTheReferenceModel) {
   const Simulator& sim = ExactSimulator();
