@@ -107,6 +107,9 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
+  else if (min_depth_held_samples < 1 || !(max_depth_held_position_sigma_m > 0) || max_depth_held_frames < 1) {
+    out << "depth-held tracking needs at least one sample and frame and a positive sigma";
+  }
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
   else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
   else if (min_marker_corners < 4 || min_keypoints < 6 || min_keypoints_tracking < 6)
@@ -162,6 +165,7 @@ struct CameraLocalizer::Impl {
   int frames_lost = 1 << 20;
   int last_markers_used = 0;    // markers the last frame's pose used (0 when lost)
   int last_keypoints_used = 0;  // keypoints the last frame's pose used (0 when lost)
+  int depth_held_run = 0;       // frames in a row held by depth and the filter
   bool have_last = false, have_prev = false;
   Rigid3d last_camera_from_room, prev_camera_from_room;
   double last_t = 0, prev_t = 0;
@@ -725,6 +729,21 @@ struct CameraLocalizer::Impl {
     }
     return by_markers || by_keypoints;
   }
+
+  // A tracked frame that Accept refused, held by the room's depth and the
+  // filter's prediction (options.depth_held_tracking); `out` as Accept left it.
+  bool AcceptHeldByDepth(const PoseRefinementResult& r, LocalizationResult* out) const {
+    if (!r.converged || depth_held_run >= options.max_depth_held_frames) return false;
+    if (plane_samples_used + surface_samples_used < options.min_depth_held_samples) return false;
+    if (!(out->position_sigma_mm > 0 && out->position_sigma_mm <= 1000 * options.max_depth_held_position_sigma_m)) {
+      return false;
+    }
+    // What the image does match must agree with the pose.
+    if (r.marker_inliers > 0 && r.marker_rms_px > 2 * options.max_marker_rms_px) return false;
+    if (r.keypoint_inliers > 0 && r.keypoint_rms_px > options.max_keypoint_rms_px) return false;
+    out->held_by_depth = true;
+    return true;
+  }
 };
 
 CameraLocalizer::CameraLocalizer(RoomMap map, const CameraIntrinsics& intrinsics,
@@ -746,6 +765,7 @@ void CameraLocalizer::Reset() {
   impl_->frames_lost = 1 << 20;
   impl_->last_markers_used = 0;
   impl_->last_keypoints_used = 0;
+  impl_->depth_held_run = 0;
   impl_->search_start.reset();
 }
 
@@ -835,6 +855,10 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
 
   PoseRefinementResult refined;
   bool ok = false;
+  // A tracked pose held by depth and the filter, used only when neither the
+  // image nor a relocalisation gives one (options.depth_held_tracking).
+  std::optional<PoseRefinementResult> held;
+  LocalizationResult held_out;
   if (predicted) {
     std::optional<PosePrior> prior;
     const std::optional<Impl::Mat6> filter_information = m.PredictedInformation(frame.timestamp_s);
@@ -844,13 +868,19 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
                         scale * options_.motion_prior_sigma_m, filter_information};
     }
     refined = m.Track(*predicted, options_.search_radius_px, prior, &tm.matching_ms, &tm.refinement_ms, &mark);
+    bool with_prior = prior.has_value();  // the refinement holds the prediction's information
     if (prior && filter_information) {
       // What the frame alone says; if the filtered pose disagrees with it
-      // beyond chance, trust the frame and restart the filter.
+      // beyond chance, trust the frame and restart the filter. A frame whose
+      // data alone leave a direction free (depth of one or two faces, a few
+      // keypoints) cannot say: its pose there is the prediction's.
       const PoseRefinementResult alone = RefineCameraPose(m.corr, m.K, refined.camera_from_room, options_.refiner);
       const Eigen::LDLT<Impl::Mat6> data(alone.information);
       const Eigen::LDLT<Impl::Mat6> pred(*filter_information);
-      if (data.info() == Eigen::Success && pred.info() == Eigen::Success) {
+      const Eigen::SelfAdjointEigenSolver<Impl::Mat6> spectrum(alone.information, Eigen::EigenvaluesOnly);
+      const bool determined = alone.converged && spectrum.eigenvalues().minCoeff() > 1e-9 * spectrum.eigenvalues().maxCoeff() &&
+                              spectrum.eigenvalues().minCoeff() > 0;
+      if (determined && data.info() == Eigen::Success && pred.info() == Eigen::Success) {
         const Impl::Mat6 cov = data.solve(Impl::Mat6::Identity()) + pred.solve(Impl::Mat6::Identity());
         const Rigid3d diff = alone.camera_from_room * refined.camera_from_room.Inverse();
         Eigen::Matrix<double, 6, 1> e;
@@ -859,12 +889,20 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
         if (!(chi2 <= options_.filter_reset_chi2)) {
           refined = alone;
           m.have_cov = false;
+          with_prior = false;
         }
       }
       Lap(&mark, &tm.refinement_ms);
     }
     ok = m.Accept(refined, true, &out);
     if (ok) out.status = LocalizationStatus::kTracked;
+    if (!ok && with_prior && options_.depth_held_tracking) {
+      LocalizationResult candidate = out;
+      if (m.AcceptHeldByDepth(refined, &candidate)) {
+        held = refined;
+        held_out = candidate;
+      }
+    }
     if (ok && out.markers_used == 0 && options_.use_keypoints && m.have_last &&
         out.keypoints_used < options_.weak_tracking_fraction * m.last_keypoints_used) {
       // Keypoints alone, on fewer inliers than the last frame had: the
@@ -911,6 +949,13 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       ok = m.Accept(refined, false, &out);
       if (ok) out.status = LocalizationStatus::kRelocalized;
     }
+    if (!ok && held) {
+      refined = *held;
+      held_out.timings = out.timings;
+      out = held_out;
+      out.status = LocalizationStatus::kTracked;
+      ok = true;
+    }
   }
   if (ok && out.status == LocalizationStatus::kRelocalized && out.markers_used == 0 && m.have_last &&
       m.frames_lost <= options_.recent_pose_max_frames) {
@@ -947,12 +992,14 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       if (m.have_cov) m.last_cov = ldlt.solve(Impl::Mat6::Identity());
     }
     m.frames_lost = 0;
+    m.depth_held_run = out.held_by_depth ? m.depth_held_run + 1 : 0;
   } else {
     out.ok = false;
     out.status = LocalizationStatus::kLost;
     out.markers_used = 0;
     out.keypoints_used = 0;
     ++m.frames_lost;
+    m.depth_held_run = 0;
     m.have_prev = false;
     m.have_cov = false;
     if (out.message.empty()) {

@@ -213,6 +213,19 @@ struct CameraLocalizerOptions {
   /// leave the classic sideways-shift / turn ambiguity (measured: 36 cm and
   /// 5.4 deg off at 3.5 m with 29 inliers at 1.2 px, reported sigma 13.6 mm).
   double max_relocalisation_position_sigma_m = 0.006;
+  /// While tracking, a frame without a marker and with too few keypoints
+  /// (a plain wall, the patient filling the view) is still localised when
+  /// the room's planes and surface in depth, with the motion filter's
+  /// prediction, hold the pose: at least `min_depth_held_samples` depth
+  /// samples matched and a 1-sigma position (filter and depth together)
+  /// within `max_depth_held_position_sigma_m`. What depth does not fix (a
+  /// direction along every face in view) keeps the prediction's growing
+  /// uncertainty, so such a run ends by itself; at most
+  /// `max_depth_held_frames` in a row.
+  bool depth_held_tracking = true;
+  int min_depth_held_samples = 150;
+  double max_depth_held_position_sigma_m = 0.005;
+  int max_depth_held_frames = 30;
 
   std::string Validate() const;
   bool Check(std::string* reason = nullptr) const;
@@ -258,6 +271,9 @@ struct LocalizationResult {
   /// used, or no depth).
   int plane_depth_samples = 0;
   int surface_depth_samples = 0;
+  /// Tracked on the room's depth and the motion filter alone (no marker,
+  /// too few keypoints): options.depth_held_tracking.
+  bool held_by_depth = false;
   double rms_px = 0;         ///< RMS reprojection error over all inliers
   double marker_rms_px = 0;
   double keypoint_rms_px = 0;

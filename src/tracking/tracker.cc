@@ -268,6 +268,10 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       }
     }
     out.message = out.body.source == BodyPoseSource::kCarried ? out.body.message : depth_note;
+    if (out.camera.held_by_depth) {
+      out.message += std::string(out.message.empty() ? "" : "; ") +
+                     "camera held by the room's depth and its motion (no room marker, few keypoints)";
+    }
   }
   out.timings.combine_ms = MsSince(t_combine);
   out.timings.total_ms = MsSince(start);

@@ -182,6 +182,7 @@ TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
     options.use_markers = false;
     options.use_room_planes = false;
     options.use_room_surface = surface;
+    options.depth_held_tracking = false;  // frames the keypoints alone hold (test below)
     CameraLocalizer localizer(map, c.folder.config.camera, options);
     double sum = 0;
     *ok = 0;
@@ -205,6 +206,84 @@ TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
   EXPECT_GT(samples_with, 100 * ok_with);
   EXPECT_GE(ok_with, ok_without);
   EXPECT_LT(with, 0.9 * without);
+}
+
+// A tracked frame whose image holds too little (no room marker, too few
+// keypoints: a plain wall, the patient filling the view) is held by the
+// room's planes and surface in depth with the motion filter's prediction:
+// tracking where keypoints never suffice (a plain room, in effect), so that
+// a frame without a fully seen room marker has only depth. Held frames are
+// as good as their stated uncertainty, and a run of them ends at
+// max_depth_held_frames.
+TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
+  const auto& c = GetSmallCase();
+  const Sequence room = Sequence::Open(c.folder.room_dir);
+  RoomMap map = BuildRoomMap(room, c.folder.config, HundredLandmarks(c.folder)).map;
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  // Only the room marker the first frame sees best stays in the map: the
+  // frames that do not see it have depth alone.
+  {
+    CameraLocalizer first(map, c.folder.config.camera, MakeCameraLocalizerOptions(c.folder.config));
+    const LocalizationResult r = first.Localize(seq.LoadFrame(0, c.folder.config.camera));
+    ASSERT_TRUE(r.ok);
+    int keep = -1;
+    double side = 0;
+    for (const auto& o : r.markers) {
+      if (o.status == MarkerStatus::kRefined && o.MeanSidePx() > side && map.FindMarker(o.id)) {
+        keep = o.id;
+        side = o.MeanSidePx();
+      }
+    }
+    ASSERT_GE(keep, 0);
+    map.markers.erase(std::remove_if(map.markers.begin(), map.markers.end(),
+                                     [keep](const RoomMapMarkerEntry& m) { return m.id != keep; }),
+                      map.markers.end());
+  }
+  struct Run {
+    int ok = 0, held = 0, longest_held = 0, beyond_bound = 0;
+    double held_error_mm = 0, worst_ratio = 0;
+  };
+  auto localise = [&](bool held, int max_frames) {
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+    options.min_keypoints = options.min_keypoints_tracking = 100000;
+    options.depth_held_tracking = held;
+    options.max_depth_held_frames = max_frames;
+    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    Run run;
+    int in_a_row = 0;
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+      in_a_row = r.ok && r.held_by_depth ? in_a_row + 1 : 0;
+      run.longest_held = std::max(run.longest_held, in_a_row);
+      if (!r.ok) continue;
+      ++run.ok;
+      if (!r.held_by_depth) continue;
+      EXPECT_EQ(r.markers_used, 0);
+      EXPECT_LT(r.keypoints_used, options.min_keypoints_tracking);
+      EXPECT_GE(r.plane_depth_samples + r.surface_depth_samples, options.min_depth_held_samples);
+      EXPECT_LE(r.position_sigma_mm, 1000 * options.max_depth_held_position_sigma_m);
+      const double error_mm = ComputePoseError(gt[i].room_from_x, r.room_from_camera).translation_mm;
+      ++run.held;
+      run.held_error_mm += error_mm;
+      run.worst_ratio = std::max(run.worst_ratio, error_mm / r.position_sigma_mm);
+      run.beyond_bound += error_mm > 3 * r.position_sigma_mm;
+    }
+    if (run.held) run.held_error_mm /= run.held;
+    return run;
+  };
+  const Run without = localise(false, 30), with = localise(true, 30), short_runs = localise(true, 2);
+  std::printf("tracking on markers and depth: %d of %zu frames localised without depth holding, %d with (%d held, "
+              "camera %.2f mm off on them, worst %.1f sigma, %d beyond 3 sigma; longest run %d); at most 2 in a row: "
+              "%d held, longest run %d\n",
+              without.ok, seq.size(), with.ok, with.held, with.held_error_mm, with.worst_ratio, with.beyond_bound,
+              with.longest_held, short_runs.held, short_runs.longest_held);
+  EXPECT_EQ(without.held, 0);
+  ASSERT_GT(with.held, 0);
+  EXPECT_GT(with.ok, without.ok);
+  EXPECT_LE(with.beyond_bound, with.held / 20);
+  EXPECT_LE(short_runs.longest_held, 2);
 }
 
 // Keypoints alone can agree on a wrong place (repeated texture); a

@@ -20,7 +20,8 @@
 // origin's tilt fused with its coplanar markers only when the tilt itself is weak),
 // NO_SURFACE=1 (the localiser without the room's surface), SURF_MAXEFF, SURF_GATE, SURF_FLAT, SURF_VOXEL,
 // SURF_RADIUS (surface option overrides), SURF_KEEP_RADIUS=M (only the stored surface within M of the couch point), SURF_XYZ=FILE (the surface's points
-// and normals written one a line).
+// and normals written one a line), NO_HELD=1 (no frame held by depth and the motion filter alone), HELD_SIGMA=M,
+// HELD_FRAMES=N (its limits; FRAME_LOC prints such a frame as "held").
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
 // the true camera sees it, put into the room by the estimated camera (what a
 // camera error does to the patient's position).
@@ -261,6 +262,9 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("MAX_EDGE_PX")) options.detector.edge.max_pixels_per_edge = std::atoi(v);
     if (std::getenv("NO_PLANES")) options.use_room_planes = false;
     if (std::getenv("NO_SURFACE")) options.use_room_surface = false;
+    if (std::getenv("NO_HELD")) options.depth_held_tracking = false;
+    if (const char* v = std::getenv("HELD_SIGMA")) options.max_depth_held_position_sigma_m = std::atof(v);
+    if (const char* v = std::getenv("HELD_FRAMES")) options.max_depth_held_frames = std::atoi(v);
     if (const char* v = std::getenv("SURF_MAXEFF")) options.room_surface_max_effective = std::atof(v);
     if (const char* v = std::getenv("SURF_GATE")) options.room_surface_gate_m = std::atof(v);
     if (const char* v = std::getenv("BAND_PX")) options.detector.edge.band_half_width_px = std::atof(v);
@@ -345,7 +349,7 @@ int main(int argc, char** argv) {
             }
           }
           std::cout << StringPrintf("    f%03zu %-11s m%d k%3d p%4d s%4d sig %.2fmm %.3fdeg iso %.2f [%s ]\n", i,
-                                    LocalizationStatusName(r.status), r.markers_used, r.keypoints_used,
+                                    r.held_by_depth ? "held" : LocalizationStatusName(r.status), r.markers_used, r.keypoints_used,
                                     r.plane_depth_samples, r.surface_depth_samples,
                                     r.position_sigma_mm, r.rotation_sigma_deg, iso_err, ids.c_str());
         }

@@ -86,25 +86,33 @@ class TrackingStage : public ::testing::Test {
       ++painted;
     }
     EXPECT_GE(painted, 2) << "the sample's first tracking frame should show stickers";
-    // The room hidden: everything outside the patient's silhouette box (the
-    // reference model's projected vertices, 20 px around) flat grey, the
-    // depth kept. The camera cannot be placed; the patient is in view.
+    // The room hidden: every pixel whose depth is not on the patient (inside
+    // the reference model's box, and in front of its back, where the couch
+    // top is) flat grey with no depth (the room's depth alone would hold the
+    // camera). The camera cannot be placed; the patient is in view.
     cv::Mat no_room(a.color.size(), CV_8UC3, cv::Scalar(128, 128, 128));
+    cv::Mat no_room_depth = cv::Mat::zeros(a.depth.size(), CV_16UC1);
     {
-      cv::Rect2d box;
-      bool first = true;
+      Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e9), hi = -lo;
       for (const auto& v : inputs.model.vertices) {
-        const Eigen::Vector3d c = camera_from_model * v.cast<double>();
-        if (c.z() <= 0) continue;
-        const Eigen::Vector2d p = config.camera.Project(c);
-        const cv::Rect2d point(p.x(), p.y(), 0, 0);
-        box = first ? point : (box | point);
-        first = false;
+        lo = lo.cwiseMin(v.cast<double>());
+        hi = hi.cwiseMax(v.cast<double>());
       }
-      const cv::Rect roi = cv::Rect(cv::Point(static_cast<int>(box.x) - 20, static_cast<int>(box.y) - 20),
-                                    cv::Point(static_cast<int>(box.br().x) + 20, static_cast<int>(box.br().y) + 20)) &
-                           cv::Rect(0, 0, a.color.cols, a.color.rows);
-      a.color(roi).copyTo(no_room(roi));
+      hi.y() -= 0.01;  // model y is posterior: the back rests on the couch top
+      const Rigid3d model_from_camera = camera_from_model.Inverse();
+      int kept = 0;
+      for (int v = 0; v < a.depth.rows; ++v) {
+        for (int u = 0; u < a.depth.cols; ++u) {
+          const double z = a.DepthM(u, v);
+          if (!(z > 0)) continue;
+          const Eigen::Vector3d p = model_from_camera * config.camera.Unproject(u, v, z);
+          if ((p.array() < lo.array()).any() || (p.array() > hi.array()).any()) continue;
+          no_room.at<cv::Vec3b>(v, u) = a.color.at<cv::Vec3b>(v, u);
+          no_room_depth.at<uint16_t>(v, u) = a.depth.at<uint16_t>(v, u);
+          ++kept;
+        }
+      }
+      EXPECT_GT(kept, 5000) << "the patient should fill part of the sample's first frame";
     }
     const fs::path dir = case_ / "tracking" / name;
     fs::create_directories(dir / "rgb");
@@ -122,7 +130,10 @@ class TrackingStage : public ::testing::Test {
       if (kinds[i] != "no_depth") depth << stamp << " " << depth_name << "\n";
       cv::Mat colour = a.color, d = a.depth;
       if (kinds[i] == "no_stickers") colour = no_stickers;
-      if (kinds[i] == "no_room") colour = no_room;
+      if (kinds[i] == "no_room") {
+        colour = no_room;
+        d = no_room_depth;
+      }
       if (kinds[i] == "empty") {
         colour = cv::Mat(a.color.size(), CV_8UC3, cv::Scalar(128, 128, 128));
         d = cv::Mat::zeros(a.depth.size(), CV_16UC1);
