@@ -345,6 +345,9 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   result.camera_response = response.message;
   CameraLocalizerOptions localizer_options = MakeCameraLocalizerOptions(folder.config);
   localizer_options.detector.edge.response = response.response;
+  // The scan is placed in the room by frames the image localises (equal
+  // weights, below): none held by depth and motion alone (2-5 mm).
+  localizer_options.depth_held_tracking = false;
   CameraLocalizer localizer(plan.room_map, camera, localizer_options);
   MarkerDetectorOptions detector_options;
   detector_options.dictionary = folder.config.dictionary;
