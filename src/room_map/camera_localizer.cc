@@ -7,6 +7,7 @@
 #include <cmath>
 #include <future>
 #include <limits>
+#include <iomanip>
 #include <sstream>
 
 #include <Eigen/Eigenvalues>
@@ -732,10 +733,24 @@ struct CameraLocalizer::Impl {
 
   // A tracked frame that Accept refused, held by the room's depth and the
   // filter's prediction (options.depth_held_tracking); `out` as Accept left it.
-  bool AcceptHeldByDepth(const PoseRefinementResult& r, LocalizationResult* out) const {
-    if (!r.converged || depth_held_run >= options.max_depth_held_frames) return false;
-    if (plane_samples_used + surface_samples_used < options.min_depth_held_samples) return false;
+  // Else false, and `why_not` says why when depth was the reason.
+  bool AcceptHeldByDepth(const PoseRefinementResult& r, LocalizationResult* out, std::string* why_not) const {
+    if (!r.converged) return false;
+    if (depth_held_run >= options.max_depth_held_frames) {
+      *why_not = "held by the room's depth for " + std::to_string(depth_held_run) + " frames, the most in a row";
+      return false;
+    }
+    const int samples = plane_samples_used + surface_samples_used;
+    if (samples < options.min_depth_held_samples) {
+      *why_not = "the room's depth matched at " + std::to_string(samples) + " samples, too few to hold the camera (" +
+                 std::to_string(options.min_depth_held_samples) + ")";
+      return false;
+    }
     if (!(out->position_sigma_mm > 0 && out->position_sigma_mm <= 1000 * options.max_depth_held_position_sigma_m)) {
+      std::ostringstream why;
+      why << "the room's depth with the camera's motion leaves it known to " << std::fixed << std::setprecision(1)
+          << out->position_sigma_mm << " mm (limit " << 1000 * options.max_depth_held_position_sigma_m << " mm)";
+      *why_not = why.str();
       return false;
     }
     // What the image does match must agree with the pose.
@@ -859,6 +874,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   // image nor a relocalisation gives one (options.depth_held_tracking).
   std::optional<PoseRefinementResult> held;
   LocalizationResult held_out;
+  std::string not_held;  // why the room's depth did not hold it, if that was tried
   if (predicted) {
     std::optional<PosePrior> prior;
     const std::optional<Impl::Mat6> filter_information = m.PredictedInformation(frame.timestamp_s);
@@ -898,7 +914,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     if (ok) out.status = LocalizationStatus::kTracked;
     if (!ok && with_prior && options_.depth_held_tracking) {
       LocalizationResult candidate = out;
-      if (m.AcceptHeldByDepth(refined, &candidate)) {
+      if (m.AcceptHeldByDepth(refined, &candidate, &not_held)) {
         held = refined;
         held_out = candidate;
       }
@@ -1006,6 +1022,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       std::ostringstream why;
       why << m.markers.size() << " map marker(s) and " << m.keypoints.size()
           << " keypoints found; too few agree on a pose";
+      if (!not_held.empty()) why << "; " << not_held;
       out.message = why.str();
     }
   }
