@@ -6,8 +6,8 @@
 #include <array>
 #include <cmath>
 #include <future>
-#include <limits>
 #include <iomanip>
+#include <limits>
 #include <sstream>
 
 #include <Eigen/Eigenvalues>

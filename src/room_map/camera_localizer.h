@@ -214,9 +214,9 @@ struct CameraLocalizerOptions {
   /// 5.4 deg off at 3.5 m with 29 inliers at 1.2 px, reported sigma 13.6 mm).
   double max_relocalisation_position_sigma_m = 0.006;
   /// While tracking, a frame without a marker and with too few keypoints
-  /// (a plain wall, the patient filling the view) is still localised when
-  /// the room's planes and surface in depth, with the motion filter's
-  /// prediction, hold the pose: at least `min_depth_held_samples` depth
+  /// (a plain wall, the patient filling the view), which relocalisation does
+  /// not place either, is still localised when the room's planes and surface
+  /// in depth, with the motion filter's prediction, hold the pose: at least `min_depth_held_samples` depth
   /// samples matched and a 1-sigma position (filter and depth together)
   /// within `max_depth_held_position_sigma_m`. What depth does not fix (a
   /// direction along every face in view) keeps the prediction's growing
