@@ -119,7 +119,7 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
       << "noise: " << (t.noise ? "true" : "false") << "\n"
       << "hard: " << (t.hard ? "true" : "false") << "\n"
       << "room_walk: " << t.room_walk << "\n"
-      << "room_texture: " << t.room_texture << "\n"
+      << (t.room_texture == "rich" ? "" : "room_texture: " + t.room_texture + "\n")  // rich: as before
       << "frames: {room: " << t.room_frames << ", body_scan: " << t.body_scan_frames
       << ", tracking: " << t.tracking_frames << ", tracking_sequences: " << t.tracking_sequences
       << "}\n"

@@ -114,7 +114,7 @@ struct SimulationTruth {
   bool noise = true;
   bool hard = false;
   std::string room_walk = "full";  ///< planning walk (optional in the file: full)
-  std::string room_texture = "rich";  ///< rich or plain (optional in the file: rich)
+  std::string room_texture = "rich";  ///< rich or plain (written only when plain; absent: rich)
   int room_frames = 0, body_scan_frames = 0, tracking_frames = 0, tracking_sequences = 0;
   Eigen::Vector3d isocentre_in_room_m = Eigen::Vector3d::Zero();
   Rigid3d room_from_model_target;
