@@ -5,6 +5,7 @@
 # the flags are arpos simulate options, space separated in one argument. The
 # default list:
 #   xtion:41-43  l515:44  "xtion:45:--hard"  "xtion:46-50:--random-conditions"
+#   "xtion:41-43:--room-texture plain"
 # For each seed: arpos simulate --tracking-sequences 2 (default frames unless
 # FRAMES is set), arpos plan, arpos session, then arpos track of every
 # tracking/seq_NN with --out, arpos evaluate of poses.txt against the
@@ -38,7 +39,7 @@ TOLERANCE_MM=${TOLERANCE_MM:-2}
 TOLERANCE_DEG=${TOLERANCE_DEG:-1}
 [ -x "$ARPOS" ] || { echo "measure_tracking: no $ARPOS (build the arpos target or set ARPOS)" >&2; exit 2; }
 if [ $# -eq 0 ]; then
-  set -- xtion:41-43 l515:44 "xtion:45:--hard" "xtion:46-50:--random-conditions"
+  set -- xtion:41-43 l515:44 "xtion:45:--hard" "xtion:46-50:--random-conditions" "xtion:41-43:--room-texture plain"
 fi
 mkdir -p "$WORK"
 RESULTS=$WORK/results.tsv
