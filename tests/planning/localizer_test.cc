@@ -283,6 +283,8 @@ TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
   ASSERT_GT(with.held, 0);
   EXPECT_GT(with.ok, without.ok);
   EXPECT_LE(with.beyond_bound, with.held / 20);
+  ASSERT_GT(with.longest_held, 2) << "the sequence should need a run longer than the cap below";
+  EXPECT_GT(short_runs.held, 0);
   EXPECT_LE(short_runs.longest_held, 2);
 }
 
