@@ -167,6 +167,7 @@ struct CameraLocalizer::Impl {
   int last_markers_used = 0;    // markers the last frame's pose used (0 when lost)
   int last_keypoints_used = 0;  // keypoints the last frame's pose used (0 when lost)
   int depth_held_run = 0;       // frames in a row held by depth and the filter
+  bool unconfirmed = false;     // relocalised by keypoints alone after a loss, no marker since
   bool have_last = false, have_prev = false;
   Rigid3d last_camera_from_room, prev_camera_from_room;
   double last_t = 0, prev_t = 0;
@@ -781,6 +782,7 @@ void CameraLocalizer::Reset() {
   impl_->last_markers_used = 0;
   impl_->last_keypoints_used = 0;
   impl_->depth_held_run = 0;
+  impl_->unconfirmed = false;
   impl_->search_start.reset();
 }
 
@@ -1007,6 +1009,12 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       m.have_cov = ldlt.info() == Eigen::Success && out.status == LocalizationStatus::kTracked;
       if (m.have_cov) m.last_cov = ldlt.solve(Impl::Mat6::Identity());
     }
+    if (out.markers_used > 0) {
+      m.unconfirmed = false;
+    } else if (out.status == LocalizationStatus::kRelocalized && m.frames_lost > 0) {
+      m.unconfirmed = true;
+    }
+    out.unconfirmed = m.unconfirmed;
     m.frames_lost = 0;
     m.depth_held_run = out.held_by_depth ? m.depth_held_run + 1 : 0;
   } else {

@@ -268,6 +268,13 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       }
     }
     out.message = out.body.source == BodyPoseSource::kCarried ? out.body.message : depth_note;
+    if (out.camera.unconfirmed) {
+      // Keypoints alone placed the camera after a loss: never `in` until a
+      // room marker confirms where it is.
+      if (out.correction.state == CorrectionState::kIn) out.correction.state = CorrectionState::kOut;
+      out.message += std::string(out.message.empty() ? "" : "; ") +
+                     "camera placed by keypoints alone (at the start or after a loss), not yet confirmed by a room marker";
+    }
     if (out.camera.held_by_depth) {
       out.message += std::string(out.message.empty() ? "" : "; ") +
                      "camera held by the room's depth and its motion (no room marker, few keypoints)";

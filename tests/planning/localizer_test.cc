@@ -288,6 +288,41 @@ TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
   EXPECT_LE(short_runs.longest_held, 2);
 }
 
+// Keypoints alone can agree on a wrong place (a repeating floor pattern);
+// a pose that descends from a keypoint-only relocalisation (at the start or
+// after a loss) stays unconfirmed until a room marker is used, and the
+// tracker never lets such a frame read `in`.
+TEST(Localizer, AKeypointOnlyRelocalisationStaysUnconfirmedUntilAMarker) {
+  const auto& c = GetSmallCase();
+  const Sequence room = Sequence::Open(c.folder.room_dir);
+  const RoomMap map = BuildRoomMap(room, c.folder.config, HundredLandmarks(c.folder)).map;
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  auto run = [&](bool markers, int* ok, int* unconfirmed, int* with_marker_unconfirmed) {
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+    options.use_markers = markers;
+    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    *ok = *unconfirmed = *with_marker_unconfirmed = 0;
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+      if (!r.ok) continue;
+      ++*ok;
+      *unconfirmed += r.unconfirmed;
+      *with_marker_unconfirmed += r.unconfirmed && r.markers_used > 0;
+    }
+  };
+  int ok = 0, unconfirmed = 0, bad = 0;
+  run(false, &ok, &unconfirmed, &bad);
+  std::printf("keypoints only: %d frames placed, %d unconfirmed\n", ok, unconfirmed);
+  ASSERT_GT(ok, 0);
+  EXPECT_EQ(unconfirmed, ok) << "no marker ever confirms a keypoint-only start";
+  run(true, &ok, &unconfirmed, &bad);
+  std::printf("with markers: %d frames placed, %d unconfirmed\n", ok, unconfirmed);
+  ASSERT_GT(ok, 0);
+  EXPECT_EQ(bad, 0);
+  EXPECT_LT(unconfirmed, ok);
+}
+
 // Keypoints alone can agree on a wrong place (repeated texture); a
 // relocalised pose beyond a hand-held camera's reach from a pose moments
 // ago is refused, and accepted when enough time has passed.
