@@ -43,6 +43,18 @@ struct PoorOriginCase {
   int origin_views = 0;
 };
 
+// Moves a case written to `tmp` to `root` unless another test process (ctest
+// runs two at once) put it there first; never removes a case another process
+// may be reading (that had failed one run with "missing depth image").
+void PublishCase(const fs::path& tmp, const fs::path& root) {
+  std::error_code ec;
+  if (!fs::exists(root / "simulation.yaml")) {
+    fs::remove_all(root, ec);  // an unfinished folder of an older layout, if any
+    fs::rename(tmp, root, ec);
+  }
+  fs::remove_all(tmp, ec);  // left only when the other process won
+}
+
 // A 60-frame random-conditions room of `seed` (cached in the build tree).
 PoorOriginCase MakeRandomRoomCase(uint64_t seed, const std::string& name) {
   PoorOriginCase out;
@@ -63,8 +75,7 @@ PoorOriginCase MakeRandomRoomCase(uint64_t seed, const std::string& name) {
     const fs::path tmp = out.root.string() + ".tmp" + std::to_string(::getpid());
     fs::remove_all(tmp);
     simulator.WriteCase(tmp);
-    fs::remove_all(out.root);
-    fs::rename(tmp, out.root);
+    PublishCase(tmp, out.root);
   }
   out.folder = LoadCaseFolder(out.root);
   out.truth = sim::LoadSimulationTruth(out.root / "simulation.yaml");
@@ -231,8 +242,7 @@ TEST(RoomMapDepth, AScaleErrorOfTheDepthIsFoundFromTheMarkersAndRemoved) {
     const fs::path tmp = root.string() + ".tmp" + std::to_string(::getpid());
     fs::remove_all(tmp);
     sim::Simulator(o).WriteCase(tmp);
-    fs::remove_all(root);
-    fs::rename(tmp, root);
+    PublishCase(tmp, root);
   }
   const CaseFolder folder = LoadCaseFolder(root);
   const sim::SimulationTruth truth = sim::LoadSimulationTruth(root / "simulation.yaml");
