@@ -54,6 +54,16 @@ RoomMapBuildOptions HundredLandmarks(const CaseFolder& folder) {
   return build;
 }
 
+// The small case's room mapped with HundredLandmarks (built once: the
+// adjustment takes seconds).
+const RoomMap& HundredLandmarkMap() {
+  static const RoomMap map = [] {
+    const auto& c = GetSmallCase();
+    return BuildRoomMap(Sequence::Open(c.folder.room_dir), c.folder.config, HundredLandmarks(c.folder)).map;
+  }();
+  return map;
+}
+
 TEST(Localizer, TrackingFramesWithinTolerance) {
   const auto& c = GetSmallCase();
   const RoomMap& map = GetSmallCaseMap().map;
@@ -87,8 +97,7 @@ TEST(Localizer, TrackingFramesWithinTolerance) {
 // runs are the same but for the planes.
 TEST(Localizer, TheFloorsDepthHoldsTheCamerasHeightAndTiltOnKeypointOnlyFrames) {
   const auto& c = GetSmallCase();
-  const Sequence room = Sequence::Open(c.folder.room_dir);
-  const RoomMap map = BuildRoomMap(room, c.folder.config, HundredLandmarks(c.folder)).map;
+  const RoomMap& map = HundredLandmarkMap();
   const auto& [name, dir] = c.folder.tracking.at(0);
   const Sequence seq = Sequence::Open(dir);
   const auto gt = *seq.CameraGroundTruth();
@@ -217,8 +226,7 @@ TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
 // max_depth_held_frames.
 TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
   const auto& c = GetSmallCase();
-  const Sequence room = Sequence::Open(c.folder.room_dir);
-  RoomMap map = BuildRoomMap(room, c.folder.config, HundredLandmarks(c.folder)).map;
+  RoomMap map = HundredLandmarkMap();  // a copy: markers are taken out below
   const auto& [name, dir] = c.folder.tracking.at(0);
   const Sequence seq = Sequence::Open(dir);
   const auto gt = *seq.CameraGroundTruth();
@@ -294,8 +302,7 @@ TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
 // tracker never lets such a frame read `in`.
 TEST(Localizer, AKeypointOnlyRelocalisationStaysUnconfirmedUntilAMarker) {
   const auto& c = GetSmallCase();
-  const Sequence room = Sequence::Open(c.folder.room_dir);
-  const RoomMap map = BuildRoomMap(room, c.folder.config, HundredLandmarks(c.folder)).map;
+  const RoomMap& map = HundredLandmarkMap();
   const auto& [name, dir] = c.folder.tracking.at(0);
   const Sequence seq = Sequence::Open(dir);
   auto run = [&](bool markers, int* ok, int* unconfirmed, int* with_marker_unconfirmed) {
