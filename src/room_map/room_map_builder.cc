@@ -1170,7 +1170,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
     };
     std::vector<DepthComparison> comparisons;
-    for (const BaMarkerObservation& o : vision.marker_observations) {
+    for (size_t oi = 0; oi < vision.marker_observations.size(); ++oi) {
+      const BaMarkerObservation& o = vision.marker_observations[oi];
       const Rigid3d camera_from_marker = vision.camera_from_room[o.camera] * vision.room_from_marker[o.marker];
       const Eigen::Vector3d n = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
       const double d = n.dot(camera_from_marker.translation);
@@ -1181,7 +1182,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
         const double expected = d / denom;
         if (!(expected > 0.1)) continue;
-        comparisons.push_back({x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected)});
+        comparisons.push_back(
+            {x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected), static_cast<int>(oi),
+             (o.camera / 5) % 2});
       }
     }
     const DepthCorrectionFit fit = FitDepthCorrection(comparisons, K);

@@ -13,7 +13,9 @@
 /// such fields in place). Fitted (robust linear least squares) to depth samples inside
 /// markers whose depth the colour image fixes through the markers' printed
 /// size (room map adjustment without depth terms). Kept only when it
-/// explains the data clearly better than no correction (FitDepthCorrection).
+/// explains the data clearly better than no correction, or predicts
+/// readings it was not fitted to (cross-validation over two halves of the
+/// views: FitDepthCorrection).
 
 #include <array>
 #include <string>
@@ -54,6 +56,13 @@ struct DepthComparison {
   double measured_m = 0;       ///< the sensor's reading
   double expected_m = 0;       ///< from the colour geometry
   double sigma_m = 0.001;      ///< the reading's noise (1 sigma)
+  /// Readings of one group (one marker view) share the view's pose error:
+  /// a group counts as at most a few independent readings when the data's
+  /// support for a correction is weighed; -1 = a group of its own.
+  int group = -1;
+  /// Which half of the data (0 or 1) the reading falls in when the
+  /// correction is cross-validated: whole views, in blocks of frames.
+  int split = 0;
 };
 
 struct DepthCorrectionFit {
@@ -62,11 +71,20 @@ struct DepthCorrectionFit {
   int samples = 0;
   /// RMS of (measured - expected) / sigma before and after the correction.
   double normalised_rms_before = 0, normalised_rms_after = 0;
+  /// The model fitted to one half of the views, tried on the other (both
+  /// ways): the drop in squared normalised residual per effective sample
+  /// against no correction (a view's readings counting as a few). Positive:
+  /// the correction predicts readings it was not fitted to.
+  bool cross_validated = false;
+  double cross_validated_gain = 0;
   std::string message;
 };
 
 /// Fits the model to `samples`; `applied` only when there are enough samples
-/// spread over depth and the normalised RMS drops by at least 20 %.
+/// spread over depth and either the normalised RMS drops by at least 15 %
+/// or the model fitted to each half of the groups (by `split`) lowers the
+/// other half's squared normalised residual by more than 0.025 per
+/// effective reading (a group counting as at most 4).
 DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& samples,
                                       const CameraIntrinsics& intrinsics);
 
