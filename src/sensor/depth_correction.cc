@@ -251,7 +251,7 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
   // RMS down by 15 %), or when it predicts readings it was not fitted to:
   // on 60-frame random simulated rooms a 2-4 mm field at 1 m moved the RMS
   // by only 6-13 % (each reading's noise is larger at the distances seen),
-  // while the cross-validated gain read 0.05-0.21 there and -0.15 to 0.008
+  // while the cross-validated gain read 0.05-0.14 there and -0.15 to 0.008
   // on the 12 cases without a depth error; the field left in place had biased
   // the body scan's placement by 1-2 mm (benchmark/accuracy.md).
   const bool explains = out.normalised_rms_after < 0.85 * out.normalised_rms_before;
