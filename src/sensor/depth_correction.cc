@@ -1,9 +1,9 @@
 #include "sensor/depth_correction.h"
 
-#include <map>
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <sstream>
 
 #include "util/check.h"

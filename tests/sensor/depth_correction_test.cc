@@ -2,6 +2,7 @@
 // room recording's: ~100 marker views of 16 readings each at 0.8-3 m, the
 // sensor model's noise, and a pose error shared by each view's readings.
 #include <cmath>
+#include <cstdio>
 #include <random>
 #include <vector>
 
@@ -56,7 +57,7 @@ std::vector<DepthComparison> Readings(double field_mm, double scale, unsigned se
   return out;
 }
 
-// A field of 1.5 mm at 1 m moves the readings' RMS by well under the 15 %
+// A field of 1.5 mm at 1 m mostly moves the readings' RMS by less than the 15 %
 // the check once required (each reading's noise is larger at the distances
 // a room is seen from), so it was left in place; it predicts the views it
 // was not fitted to, and is removed.
