@@ -274,8 +274,8 @@ struct LocalizationResult {
   /// Tracked on the room's depth and the motion filter alone (no marker,
   /// too few keypoints): options.depth_held_tracking.
   bool held_by_depth = false;
-  /// The pose descends from a relocalisation by keypoints alone after the
-  /// camera was lost, and no room marker has been used since: keypoints can
+  /// The pose descends from a relocalisation by keypoints alone (at the
+  /// start or after a loss), and no room marker has been used since: keypoints can
   /// agree on a wrong place (a repeating floor pattern: measured 0.75 m off
   /// with a 2 mm sigma), so such a pose is not to be trusted within a
   /// tolerance until a marker confirms it.

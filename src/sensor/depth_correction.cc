@@ -179,17 +179,23 @@ constexpr double kGroupEffective = 4.0;
 // kept although it moves the readings' RMS by less than 15 %.
 constexpr double kMinCrossValidatedGain = 0.025;
 
+// What one reading counts for: its group's readings count as at most
+// kGroupEffective together.
+double GroupShare(const DepthComparison& s, const std::map<int, int>& group_size) {
+  const int n = s.group < 0 ? 1 : group_size.at(s.group);
+  return std::min(1.0, kGroupEffective / n);
+}
+
 // Sum over the samples where `use` is set of the squared normalised residual
-// after `c`, a group's samples counting as at most kGroupEffective together.
+// after `c`, each weighted by its GroupShare.
 double SharedChiSquare(const std::vector<DepthComparison>& samples, const std::vector<char>& use,
                        const std::map<int, int>& group_size, const DepthCorrection& c) {
   double chi = 0;
   for (size_t i = 0; i < samples.size(); ++i) {
     if (!use[i]) continue;
     const DepthComparison& s = samples[i];
-    const int n = s.group < 0 ? 1 : group_size.at(s.group);
     const double r = (c.TrueDepth(s.measured_m, s.x, s.y) - s.expected_m) / s.sigma_m;
-    chi += std::min(1.0, kGroupEffective / n) * r * r;
+    chi += GroupShare(s, group_size) * r * r;
   }
   return chi;
 }
@@ -232,8 +238,7 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
   for (size_t i = 0; i < samples.size(); ++i) {
     half_a[i] = samples[i].split == 0;
     half_b[i] = !half_a[i];
-    const int n = samples[i].group < 0 ? 1 : group_size.at(samples[i].group);
-    n_eff += std::min(1.0, kGroupEffective / n);
+    n_eff += GroupShare(samples[i], group_size);
   }
   const DepthCorrection none;
   if (std::count(half_a.begin(), half_a.end(), 1) >= 100 && std::count(half_b.begin(), half_b.end(), 1) >= 100) {
@@ -267,7 +272,6 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
                                    "not corrected",
                                    out.normalised_rms_before, out.samples, out.normalised_rms_after,
                                    out.cross_validated_gain);
-  if (out.applied) out.correction = c;
   return out;
 }
 void CorrectDepthImage(const CameraIntrinsics& intrinsics, const DepthCorrection& correction,
