@@ -95,6 +95,43 @@ struct MarkerDepthCost {
   double z, w;
 };
 
+// A depth pixel on a room plane: the plane (unit normal n, offset o, room
+// frame) in the camera is n_c = R n, n_c . x = o + n_c . t; the ray (x, y, 1)
+// meets it at z = (o + n_c . t) / (n_c . ray).
+struct PlaneDepthCost {
+  PlaneDepthCost(const CameraIntrinsics& k, const DepthSample& s, double weight_over_sigma)
+      : ray((s.pixel.x() - k.cx) / k.fx, (s.pixel.y() - k.cy) / k.fy, 1.0), z(s.depth_m),
+        w(weight_over_sigma) {}
+  template <typename T>
+  bool operator()(const T* cq, const T* ct, const T* normal, const T* offset, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> camera_q(cq);
+    const Eigen::Matrix<T, 3, 1> n = camera_q * Eigen::Map<const Eigen::Matrix<T, 3, 1>>(normal);
+    const T d = offset[0] + n.dot(Eigen::Map<const Eigen::Matrix<T, 3, 1>>(ct));
+    residual[0] = (d / n.dot(ray.cast<T>()) - T(z)) * T(w);
+    return true;
+  }
+  Eigen::Vector3d ray;
+  double z, w;
+};
+
+// A marker on a room plane: its centre's distance from the plane (one
+// residual, / flatness sigma) and, when tilt_sigma > 0, its normal's
+// difference from the plane's (three, / tilt sigma).
+struct MarkerOnPlaneCost {
+  MarkerOnPlaneCost(double flatness_sigma, double tilt_sigma)
+      : inv_flatness(1.0 / flatness_sigma), inv_tilt(tilt_sigma > 0 ? 1.0 / tilt_sigma : 0.0) {}
+  template <typename T>
+  bool operator()(const T* mq, const T* mt, const T* normal, const T* offset, T* residual) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> n(normal), centre(mt);
+    residual[0] = (n.dot(centre) - offset[0]) * T(inv_flatness);
+    const Eigen::Matrix<T, 3, 1> marker_normal =
+        Eigen::Map<const Eigen::Quaternion<T>>(mq) * Eigen::Matrix<T, 3, 1>(T(0), T(0), T(1));
+    for (int k = 0; k < 3; ++k) residual[1 + k] = (marker_normal[k] - n[k]) * T(inv_tilt);
+    return true;
+  }
+  double inv_flatness, inv_tilt;
+};
+
 struct KeypointCost {
   KeypointCost(const CameraIntrinsics& k, const Eigen::Vector2d& observed, double sigma)
       : fx(k.fx), fy(k.fy), cx(k.cx), cy(k.cy), obs(observed), inv_sigma(1.0 / sigma) {}
@@ -261,6 +298,44 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
     camera_used[o.camera] = true;
     landmark_used[o.landmark] = true;
   }
+  std::vector<std::array<double, 4>> planes(P.planes.size());  // normal, offset
+  for (size_t i = 0; i < planes.size(); ++i) {
+    const Eigen::Vector3d n = P.planes[i].normal.normalized();
+    planes[i] = {n.x(), n.y(), n.z(), P.planes[i].offset};
+  }
+  std::vector<bool> plane_used(planes.size(), false);
+  if (options.use_plane_depth) {
+    for (const auto& o : P.plane_observations) {
+      ARPOS_CHECK(o.camera >= 0 && o.camera < static_cast<int>(cameras.size()) && o.plane >= 0 &&
+                      o.plane < static_cast<int>(planes.size()) && o.share >= 1,
+                  "plane observation with a bad index or share");
+      // A camera seen by nothing else would be held by its plane alone.
+      if (!camera_used[o.camera]) continue;
+      PoseBlock& c = cameras[o.camera];
+      for (const auto& s : o.samples) {
+        cp.AddResidualBlock(new ceres::AutoDiffCostFunction<PlaneDepthCost, 1, 4, 3, 3, 1>(
+                                new PlaneDepthCost(P.intrinsics, s, 1.0 / (o.share * options.DepthSigmaM(s.depth_m)))),
+                            &huber, c.q, c.t, planes[o.plane].data(), planes[o.plane].data() + 3);
+      }
+      plane_used[o.plane] = true;
+    }
+    for (size_t i = 0; i < planes.size(); ++i) {
+      ARPOS_CHECK(P.planes[i].flatness_sigma_m > 0 && P.planes[i].tilt_sigma_rad >= 0,
+                  "plane flatness sigma must be positive, its tilt sigma not negative");
+      for (int m : P.planes[i].markers) {
+        ARPOS_CHECK(m >= 0 && m < static_cast<int>(markers.size()), "plane marker with a bad index");
+        if (!marker_used[m]) continue;
+        cp.AddResidualBlock(new ceres::AutoDiffCostFunction<MarkerOnPlaneCost, 4, 4, 3, 3, 1>(
+                                new MarkerOnPlaneCost(P.planes[i].flatness_sigma_m, P.planes[i].tilt_sigma_rad)),
+                            nullptr, markers[m].q, markers[m].t, planes[i].data(), planes[i].data() + 3);
+        plane_used[i] = true;
+      }
+    }
+  }
+  ceres::SphereManifold<3> sphere_manifold;
+  for (size_t i = 0; i < planes.size(); ++i) {
+    if (plane_used[i]) cp.SetManifold(planes[i].data(), &sphere_manifold);
+  }
   for (size_t i = 0; i < cameras.size(); ++i) {
     if (camera_used[i]) cp.SetManifold(cameras[i].q, &quaternion_manifold);
   }
@@ -300,6 +375,11 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
     }
     for (size_t i = 0; i < markers.size(); ++i) {
       if (marker_used[i] && !P.marker_fixed[i]) P.room_from_marker[i] = markers[i].Get();
+    }
+    for (size_t i = 0; i < planes.size(); ++i) {
+      if (!plane_used[i]) continue;
+      P.planes[i].normal = Eigen::Vector3d(planes[i][0], planes[i][1], planes[i][2]).normalized();
+      P.planes[i].offset = planes[i][3];
     }
   }
   summary.seconds =

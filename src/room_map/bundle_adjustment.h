@@ -7,6 +7,8 @@
 /// - keypoint depths (measured z vs the landmark's z in the camera), and
 /// - marker-plane depths (depth pixels inside a marker vs the depth of its
 ///   plane along the pixel's ray),
+/// - room-plane depths (depth pixels on a plane of the room, the floor or a
+///   wall, vs that plane along the pixel's ray; the plane is adjusted too),
 /// each whitened by its sigma and under a Huber loss. The origin marker's pose
 /// is held at the identity: it fixes the room frame (and, with the printed
 /// marker side and depth, the scale).
@@ -68,6 +70,28 @@ struct BaKeypointObservation {
   float depth_m = 0;  ///< 0 = no depth
 };
 
+/// A plane of the room (n . x = offset, room frame, n unit), adjusted.
+/// `markers` (indices into BaProblem::room_from_marker: markers printed flat
+/// on that floor or wall) lie on it: their centres within flatness_sigma_m,
+/// their normals along the plane's within tilt_sigma_rad (0: not tied).
+struct BaPlane {
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+  double offset = 0;
+  std::vector<int> markers;
+  double flatness_sigma_m = 0.002;
+  double tilt_sigma_rad = 0;
+};
+
+/// Depth pixels of one camera on one room plane. Each sample's sigma is the
+/// depth noise model's times `share` (>= 1: the samples of one view share
+/// its depth errors and count as fewer independent ones).
+struct BaPlaneObservation {
+  int camera = -1;
+  int plane = -1;
+  double share = 1;
+  std::vector<DepthSample> samples;
+};
+
 struct BaProblem {
   CameraIntrinsics intrinsics;
   double marker_size_m = 0;
@@ -77,6 +101,8 @@ struct BaProblem {
   std::vector<Eigen::Vector3d> landmarks_in_room;
   std::vector<BaMarkerObservation> marker_observations;
   std::vector<BaKeypointObservation> keypoint_observations;
+  std::vector<BaPlane> planes;
+  std::vector<BaPlaneObservation> plane_observations;
 };
 
 struct BaOptions {
@@ -90,6 +116,7 @@ struct BaOptions {
   int marker_depth_max_effective = 4;
   bool use_keypoint_depth = true;
   bool use_marker_depth = true;
+  bool use_plane_depth = true;
   int max_iterations = 50;
   int threads = 2;
   double function_tolerance = 1e-7;

@@ -18,6 +18,7 @@
 #include "features/edge_refinement.h"
 #include "geometry/so3.h"
 #include "room_map/bundle_adjustment.h"
+#include "room_map/room_planes.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -37,28 +38,6 @@ void Lap(double* mark, double* bucket) {
   *mark = now;
 }
 
-// The plane through weighted points: its weighted centroid and the weighted
-// scatter's eigen decomposition (ascending: column 0 is the normal, up to
-// sign; eigenvalue 1 the squared spread along its narrower extent).
-struct WeightedPlane {
-  Eigen::Vector3d centroid;
-  Eigen::Vector3d normal;
-  Eigen::Vector3d spread2;  // eigenvalues of the weighted covariance
-};
-std::optional<WeightedPlane> FitWeightedPlane(const std::vector<Eigen::Vector3d>& points,
-                                              const std::vector<double>& weights) {
-  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-  double wsum = 0;
-  for (size_t i = 0; i < points.size(); ++i) centroid += weights[i] * points[i], wsum += weights[i];
-  if (!(wsum > 0)) return std::nullopt;
-  centroid /= wsum;
-  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (size_t i = 0; i < points.size(); ++i) {
-    scatter += weights[i] * (points[i] - centroid) * (points[i] - centroid).transpose();
-  }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scatter / wsum);
-  return WeightedPlane{centroid, eig.eigenvectors().col(0).normalized(), eig.eigenvalues()};
-}
 
 }  // namespace
 
@@ -207,47 +186,18 @@ struct CameraLocalizer::Impl {
     }
   }
 
-  // Groups the map's markers by plane (normals within 3 deg, centres within
-  // 2 cm of the seed marker's plane), largest groups first, each marker in
-  // one group; a plane fitted to the corners of each group of at least
-  // room_plane_min_markers markers.
+  // The map's marker planes (room_planes.h).
   void FindRoomPlanes() {
-    const size_t n = map.markers.size();
-    std::vector<bool> used(n, false);
-    const double cos_tol = std::cos(RadFromDeg(3.0));
-    while (true) {
-      std::vector<size_t> best;
-      for (size_t i = 0; i < n; ++i) {
-        if (used[i]) continue;
-        const Eigen::Vector3d ni = map.markers[i].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
-        const double di = ni.dot(map.markers[i].room_from_marker.translation);
-        std::vector<size_t> group;
-        for (size_t j = 0; j < n; ++j) {
-          if (used[j]) continue;
-          const Eigen::Vector3d nj = map.markers[j].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
-          if (ni.dot(nj) < cos_tol) continue;
-          if (std::abs(ni.dot(map.markers[j].room_from_marker.translation) - di) > 0.02) continue;
-          group.push_back(j);
-        }
-        if (group.size() > best.size()) best = group;
-      }
-      if (static_cast<int>(best.size()) < options.room_plane_min_markers) break;
-      std::vector<Eigen::Vector3d> corners;
-      for (size_t j : best) {
-        used[j] = true;
-        corners.insert(corners.end(), map.markers[j].corners_in_room.begin(), map.markers[j].corners_in_room.end());
-      }
-      const WeightedPlane fit = *FitWeightedPlane(corners, std::vector<double>(corners.size(), 1.0));
-      // Markers in a row (or two side by side) leave the plane's tilt across
-      // the row to their own width: such a group is no plane to lean on.
-      if (std::sqrt(std::max(0.0, fit.spread2(1))) < options.room_plane_min_spread_m) continue;
-      RoomPlane plane;
-      plane.normal = fit.normal;
-      const Eigen::Vector3d n0 = map.markers[best.front()].room_from_marker.rotation * Eigen::Vector3d::UnitZ();
-      if (plane.normal.dot(n0) < 0) plane.normal = -plane.normal;
-      plane.offset = plane.normal.dot(fit.centroid);
-      for (size_t j : best) plane.marker_centres.push_back(map.markers[j].room_from_marker.translation);
-      planes.push_back(std::move(plane));
+    std::vector<Eigen::Vector3d> normals, centres;
+    std::vector<std::array<Eigen::Vector3d, 4>> corners;
+    for (const auto& m : map.markers) {
+      normals.push_back(m.room_from_marker.rotation * Eigen::Vector3d::UnitZ());
+      centres.push_back(m.room_from_marker.translation);
+      corners.push_back(m.corners_in_room);
+    }
+    for (MarkerPlane& p : FindMarkerPlanes(normals, centres, corners, options.room_plane_min_markers,
+                                           options.room_plane_min_spread_m)) {
+      planes.push_back({p.normal, p.offset, std::move(p.marker_centres)});
     }
   }
 
@@ -326,32 +276,13 @@ struct CameraLocalizer::Impl {
       const std::vector<Sample>& cand = on[p];
       const std::vector<Eigen::Vector3d>& points = on_points[p];
       if (static_cast<int>(cand.size()) < options.room_plane_min_samples) continue;
-      // The plane as this frame's depth shows it (camera frame), fitted to
-      // the candidates with those beyond 2.5 sigma (across the plane) left
-      // out, three times: the gate above also lets in the foot of what
-      // stands on the plane (a wall, the couch base), whose pixels would
-      // tilt it; only the fitted plane's inliers are kept.
-      Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
-      double d = n.dot(camera_from_room * (planes[p].normal * planes[p].offset));
-      std::vector<double> weight(cand.size());
-      for (int pass = 0; pass < 3; ++pass) {
-        for (size_t k = 0; k < cand.size(); ++k) {
-          const double across = DepthSigma(cand[k].z) * std::abs(n.dot(points[k].normalized()));
-          const bool in = std::abs(n.dot(points[k]) - d) < 2.5 * std::max(across, 1e-3);
-          weight[k] = in ? 1.0 / (across * across + 1e-6) : 0.0;
-        }
-        const std::optional<WeightedPlane> fit = FitWeightedPlane(points, weight);
-        if (!fit) break;
-        Eigen::Vector3d fitted = fit->normal;
-        if (fitted.dot(n) < 0) fitted = -fitted;
-        if (fitted.dot(n) < std::cos(RadFromDeg(5.0))) break;  // not the mapped plane
-        n = fitted;
-        d = n.dot(fit->centroid);
-      }
+      // The plane as this frame's depth shows it (room_planes.h).
+      const Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
+      const double d = n.dot(camera_from_room * (planes[p].normal * planes[p].offset));
+      std::vector<double> sigma_z(cand.size());
+      for (size_t k = 0; k < cand.size(); ++k) sigma_z[k] = DepthSigma(cand[k].z);
       std::vector<const Sample*> kept;
-      for (size_t k = 0; k < cand.size(); ++k) {
-        if (weight[k] > 0) kept.push_back(&cand[k]);
-      }
+      for (size_t k : PointsOnViewedPlane(points, sigma_z, n, d)) kept.push_back(&cand[k]);
       const double count = static_cast<double>(kept.size());
       if (count < options.room_plane_min_samples) continue;
       const double share = std::sqrt(std::max(1.0, count / options.room_plane_max_effective));

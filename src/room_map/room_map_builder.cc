@@ -17,8 +17,10 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "geometry/so3.h"
 #include "room_map/marker_graph.h"
 #include "room_map/pose_refiner.h"
+#include "room_map/room_planes.h"
 #include "util/check.h"
 #include "util/logging.h"
 #include "util/string_util.h"
@@ -39,6 +41,7 @@ struct FrameData {
   std::vector<std::vector<DepthSample>> depth_samples;  // parallel
   std::vector<std::vector<DepthSample>> support_samples;  // parallel; the origin's only
   std::vector<int> all_ids_seen;           // every room id detected, refined or not
+  std::vector<float> grid_z;               // depth (m, 0: none) at the plane grid's pixels
   KeypointSet keypoints;
   std::vector<Eigen::Vector2d> keypoint_px;  // undistorted
   bool posed = false;
@@ -395,6 +398,11 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (support_plane_samples < 0) out << "support_plane_samples must not be negative";
   else if (!(support_plane_half_width_m > 0)) out << "support_plane_half_width_m must be positive";
   else if (!(support_plane_min_sigma_deg >= 0)) out << "support_plane_min_sigma_deg must not be negative";
+  else if (room_plane_min_markers < 2 || !(room_plane_min_spread_m >= 0) || !(room_plane_support_m > 0) ||
+           !(room_plane_gate_m > 0) || room_plane_min_samples < 1 || room_plane_max_samples < 1 ||
+           !(room_plane_max_effective >= 1) || !(room_plane_flatness_m > 0) ||
+           !(room_plane_marker_tilt_deg >= 0))
+    out << "room plane settings must be positive (at least 2 markers a plane)";
   else if (min_marker_observations < 1) out << "min_marker_observations must be at least 1";
   else if (!(association_radius_px > 0)) out << "association_radius_px must be positive";
   else if (max_hamming < 1 || max_hamming > 256) out << "max_hamming must be in 1..256";
@@ -478,6 +486,9 @@ std::string RoomMapBuildReport::ToText() const {
       "%.3f mm (1 sigma)",
       origin_observations, room_frame_tilt_sigma_deg, room_frame_yaw_sigma_deg,
       room_frame_couch_sigma_mm);
+  if (origin_plane_views > 0) {
+    out << StringPrintf("; tilt from the origin's views and the depth of its plane in %d views", origin_plane_views);
+  }
   if (coplanar_markers > 0 || support_plane_views > 0) {
     out << "; tilt from the origin's views";
     if (coplanar_markers > 0) out << StringPrintf(", the plane of %d markers coplanar with it", coplanar_markers);
@@ -491,6 +502,7 @@ std::string RoomMapBuildReport::ToText() const {
   out << "\n";
   if (!camera_response.empty()) out << camera_response << "\n";
   if (!depth_correction.empty()) out << depth_correction << "\n";
+  if (!room_planes.empty()) out << room_planes << "\n";
   for (const auto& w : warnings) out << "warning: " << w << "\n";
   return out.str();
 }
@@ -536,6 +548,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   }
 
   std::vector<FrameData> frames(indices.size());
+  // Where the room planes' depth is read: about 80 samples across the image.
+  const DepthSampleGrid plane_grid =
+      options.use_room_planes ? MakeDepthSampleGrid(K, std::max(8, K.width / 80)) : DepthSampleGrid{};
   {
     progress("detecting markers and keypoints", 0.0);
     std::atomic<int> next{0}, done{0};
@@ -555,6 +570,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
           f.index = indices[slot];
           const RgbdFrame frame = sequence.LoadFrame(f.index, K);
           cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+          if (!plane_grid.px.empty() && !frame.depth.empty()) {
+            f.grid_z.resize(plane_grid.px.size());
+            for (size_t i = 0; i < plane_grid.px.size(); ++i) {
+              f.grid_z[i] = static_cast<float>(frame.depth.at<uint16_t>(plane_grid.px[i]) / K.depth_scale);
+            }
+          }
           detector.Detect(gray, &detected);
           for (const auto& obs : detected) {
             f.all_ids_seen.push_back(obs.id);
@@ -1219,6 +1240,105 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
     }
   }
+  if (options.use_room_planes) {
+    // The room's planes (room_planes.h) at the map's current state, and each
+    // frame's depth pixels on them.
+    std::vector<Eigen::Vector3d> normals, centres;
+    std::vector<std::array<Eigen::Vector3d, 4>> corners;
+    const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
+    for (const Rigid3d& m : ba.room_from_marker) {
+      normals.push_back(m.rotation * Eigen::Vector3d::UnitZ());
+      centres.push_back(m.translation);
+      std::array<Eigen::Vector3d, 4> c;
+      for (int k = 0; k < 4; ++k) c[k] = m * in_marker[k];
+      corners.push_back(c);
+    }
+    std::vector<MarkerPlane> planes =
+        FindMarkerPlanes(normals, centres, corners, options.room_plane_min_markers, options.room_plane_min_spread_m);
+    const int origin_slot = marker_slot.at(origin_id);
+    if (options.room_plane_for_origin &&
+        std::none_of(planes.begin(), planes.end(), [&](const MarkerPlane& p) {
+          return std::find(p.markers.begin(), p.markers.end(), origin_slot) != p.markers.end();
+        })) {
+      MarkerPlane p;
+      p.normal = normals[origin_slot];
+      p.offset = p.normal.dot(centres[origin_slot]);
+      p.markers = {origin_slot};
+      p.marker_centres = {centres[origin_slot]};
+      planes.push_back(std::move(p));
+    }
+    ba.planes.clear();
+    ba.plane_observations.clear();
+    for (const MarkerPlane& p : planes) {
+      BaPlane b;
+      b.normal = p.normal;
+      b.offset = p.offset;
+      if (options.room_plane_ties_markers) b.markers = p.markers;
+      b.flatness_sigma_m = options.room_plane_flatness_m;
+      b.tilt_sigma_rad = RadFromDeg(options.room_plane_marker_tilt_deg);
+      ba.planes.push_back(std::move(b));
+    }
+    const DepthCorrection& correction = result.map.depth_correction;
+    const bool correct = !correction.IsIdentity();
+    const double support2 = options.room_plane_support_m * options.room_plane_support_m;
+    int samples_used = 0, views_used = 0;
+    for (size_t c = 0; c < ba.camera_from_room.size(); ++c) {
+      const FrameData& f = frames[camera_frame[c]];
+      if (f.grid_z.empty()) continue;
+      const Rigid3d& camera_from_room = ba.camera_from_room[c];
+      const Rigid3d room_from_camera = camera_from_room.Inverse();
+      std::vector<std::vector<size_t>> on(planes.size());
+      std::vector<std::vector<Eigen::Vector3d>> on_points(planes.size());
+      std::vector<std::vector<double>> on_sigma(planes.size());
+      std::vector<double> z_of(f.grid_z.size(), 0.0);
+      for (size_t i = 0; i < f.grid_z.size(); ++i) {
+        double z = f.grid_z[i];
+        if (!(z > 0)) continue;
+        const Eigen::Vector2d& r = plane_grid.ray[i];
+        if (correct) z = correction.TrueDepth(z, r.x(), r.y());
+        z_of[i] = z;
+        const Eigen::Vector3d xc(r.x() * z, r.y() * z, z);
+        const Eigen::Vector3d x = room_from_camera * xc;
+        const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
+        for (size_t p = 0; p < planes.size(); ++p) {
+          if (std::abs(planes[p].normal.dot(x) - planes[p].offset) > gate) continue;
+          bool near = false;
+          for (const auto& m : planes[p].marker_centres) near |= (x - m).squaredNorm() < support2;
+          if (!near) continue;
+          on[p].push_back(i);
+          on_points[p].push_back(xc);
+          on_sigma[p].push_back(joint_options.DepthSigmaM(z));
+          break;
+        }
+      }
+      for (size_t p = 0; p < planes.size(); ++p) {
+        if (static_cast<int>(on[p].size()) < options.room_plane_min_samples) continue;
+        const Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
+        const double d = n.dot(camera_from_room * (planes[p].normal * planes[p].offset));
+        const std::vector<size_t> kept = PointsOnViewedPlane(on_points[p], on_sigma[p], n, d);
+        if (static_cast<int>(kept.size()) < options.room_plane_min_samples) continue;
+        BaPlaneObservation o;
+        o.camera = static_cast<int>(c);
+        o.plane = static_cast<int>(p);
+        // Evenly thinned to at most room_plane_max_samples; those kept count
+        // as room_plane_max_effective independent ones at most.
+        const size_t step = (kept.size() + options.room_plane_max_samples - 1) / options.room_plane_max_samples;
+        for (size_t k = 0; k < kept.size(); k += step) {
+          const size_t i = on[p][kept[k]];
+          const Eigen::Vector2d& r = plane_grid.ray[i];
+          o.samples.push_back({Eigen::Vector2f(static_cast<float>(r.x() * K.fx + K.cx),
+                                               static_cast<float>(r.y() * K.fy + K.cy)),
+                               static_cast<float>(z_of[i])});
+        }
+        o.share = std::sqrt(std::max(1.0, o.samples.size() / options.room_plane_max_effective));
+        samples_used += static_cast<int>(o.samples.size());
+        ++views_used;
+        ba.plane_observations.push_back(std::move(o));
+      }
+    }
+    report.room_planes = StringPrintf("%zu room plane(s) in the adjustment, %d views, %d depth samples",
+                                      planes.size(), views_used, samples_used);
+  }
   report.joint_adjustment = RunBundleAdjustment(&ba, joint_options);
   // Drop outlier observations and adjust again.
   {
@@ -1285,6 +1405,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     for (Rigid3d& m : ba.room_from_marker) m = origin_from_root * m;
     for (Rigid3d& c : ba.camera_from_room) c = c * root_from_origin;
     for (Eigen::Vector3d& l : ba.landmarks_in_room) l = origin_from_root * l;
+    for (BaPlane& p : ba.planes) {  // n . x = o  ->  (R n) . x' = o + (R n) . t
+      p.normal = origin_from_root.rotation * p.normal;
+      p.offset += p.normal.dot(origin_from_root.translation);
+    }
   }
   for (size_t c = 0; c < camera_frame.size(); ++c) frames[camera_frame[c]].camera_from_room = ba.camera_from_room[c];
   report.adjustment_s = SecondsSince(t_adjust);
@@ -1317,6 +1441,52 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
     }
     report.origin_observations = used;
+    // The plane the origin is tied to in the adjustment (its floor or wall),
+    // as the depth of every view of it fixes its tilt given the cameras, and
+    // the tie's own slack: information on the origin's tilt.
+    int origin_plane = -1;
+    for (size_t p = 0; p < ba.planes.size(); ++p) {
+      const std::vector<int>& m = ba.planes[p].markers;
+      if (ba.planes[p].tilt_sigma_rad > 0 && std::find(m.begin(), m.end(), slot) != m.end()) {
+        origin_plane = static_cast<int>(p);
+      }
+    }
+    if (origin_plane >= 0) {
+      const BaPlane& plane = ba.planes[origin_plane];
+      Eigen::Matrix3d plane_info = Eigen::Matrix3d::Zero();  // rotation about room x, y; offset
+      int views = 0;
+      for (const BaPlaneObservation& o : ba.plane_observations) {
+        if (o.plane != origin_plane) continue;
+        ++views;
+        const Rigid3d& camera_from_room = ba.camera_from_room[o.camera];
+        for (const DepthSample& sample : o.samples) {
+          const Eigen::Vector3d ray((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy, 1.0);
+          auto depth = [&](const Eigen::Vector3d& xi) {
+            const Eigen::Vector3d n =
+                camera_from_room.rotation * (Rigid3d::FromRotationVector(Eigen::Vector3d(xi.x(), xi.y(), 0),
+                                                                         Eigen::Vector3d::Zero())
+                                                 .rotation *
+                                             plane.normal);
+            return (plane.offset + xi.z() + n.dot(camera_from_room.translation)) / n.dot(ray);
+          };
+          Eigen::RowVector3d j;
+          for (int k = 0; k < 3; ++k) {
+            Eigen::Vector3d d = Eigen::Vector3d::Zero();
+            d(k) = 1e-6;
+            j(k) = (depth(d) - depth(-d)) / 2e-6;
+          }
+          const double sigma = o.share * joint_options.DepthSigmaM(sample.depth_m);
+          plane_info.noalias() += j.transpose() * j / (sigma * sigma);
+        }
+      }
+      const Eigen::Matrix3d plane_cov = plane_info.ldlt().solve(Eigen::Matrix3d::Identity());
+      if (views > 0 && plane_cov.allFinite()) {
+        const Eigen::Matrix2d tilt_cov =
+            plane_cov.topLeftCorner<2, 2>() + plane.tilt_sigma_rad * plane.tilt_sigma_rad * Eigen::Matrix2d::Identity();
+        info.topLeftCorner<2, 2>() += tilt_cov.inverse();
+        report.origin_plane_views = views;
+      }
+    }
     const Eigen::Matrix<double, 6, 6> cov = info.ldlt().solve(Eigen::Matrix<double, 6, 6>::Identity());
     if (used > 0 && cov.allFinite()) {
       // Tilt: rotation about the room's x and y axes (the origin marker's
@@ -1338,7 +1508,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     const bool weak_tilt = report.room_frame_tilt_sigma_deg > options.max_room_frame_tilt_sigma_deg;
     const bool weak_at_couch = options.fuse_tilt_when_weak_at_couch &&
                                report.room_frame_couch_sigma_mm > options.max_room_frame_couch_sigma_mm;
-    if ((weak_tilt || weak_at_couch) && std::isfinite(report.room_frame_tilt_sigma_deg)) {
+    if ((weak_tilt || weak_at_couch) && std::isfinite(report.room_frame_tilt_sigma_deg) &&
+        report.origin_plane_views == 0) {  // (tied to its plane: the adjustment fused them)
       const Rigid3d origin_from_room = ba.room_from_marker[slot].Inverse();
       std::vector<TiltEstimate> estimates;
       TiltEstimate own;

@@ -156,6 +156,34 @@ struct RoomMapBuildOptions {
   /// the square root of the views (deg, 1 sigma).
   double support_plane_min_sigma_deg = 0.02;
 
+  /// The room's planes in the joint adjustment: markers lying in one plane
+  /// (at least room_plane_min_markers, spread room_plane_min_spread_m RMS
+  /// across; room_planes.h) make a plane, adjusted with the map; each
+  /// frame's depth pixels on it (a grid of about 80 across the image, within
+  /// room_plane_gate_m or 3 sigma of it at the frame's pose, within
+  /// room_plane_support_m of one of its markers, fitted again as the frame
+  /// sees the plane and its outliers left out) tie the frame's tilt and
+  /// distance to it, at most room_plane_max_samples a view counting as
+  /// room_plane_max_effective independent ones.
+  bool use_room_planes = true;
+  /// The origin's own plane (the floor or wall around it) is one even
+  /// without other markers in it; and the markers of a plane lie on it
+  /// (centres within room_plane_flatness_m, normals along the plane's within
+  /// room_plane_marker_tilt_deg, 1 sigma; 0: not tied): the depth of every
+  /// view of that floor or wall then holds the origin's tilt, not its few
+  /// pixels alone.
+  bool room_plane_for_origin = true;
+  bool room_plane_ties_markers = true;
+  double room_plane_flatness_m = 0.002;
+  double room_plane_marker_tilt_deg = 0.03;
+  int room_plane_min_markers = 2;
+  double room_plane_min_spread_m = 0.2;
+  double room_plane_support_m = 2.0;
+  double room_plane_gate_m = 0.03;
+  int room_plane_min_samples = 40;
+  int room_plane_max_samples = 200;
+  double room_plane_max_effective = 25;
+
   /// Observations with a reprojection error above this many sigmas after the
   /// first joint adjustment are dropped before the second.
   double outlier_sigmas = 4.0;
@@ -201,6 +229,11 @@ struct RoomMapBuildReport {
   std::string camera_response;
   /// The depth check against the markers, and the correction if one was made.
   std::string depth_correction;
+  /// The room's planes in the joint adjustment (empty: not used).
+  std::string room_planes;
+  /// Views whose depth of the origin's plane (tied to it in the
+  /// adjustment) went into the room frame's tilt uncertainty; 0: none.
+  int origin_plane_views = 0;
   /// The room frame's own uncertainty (1 sigma): the origin marker's pose
   /// from its views given the adjusted cameras; tilt about the marker's
   /// in-plane axes, yaw about its normal, and the position error this

@@ -137,10 +137,13 @@ TEST(RoomMapOrigin, RarelySeenSmallObliqueOriginStillGivesARoomFrame) {
 // The origin's tilt is fused with the markers coplanar with it when the room
 // frame is weak at the couch, even with the tilt itself within its tolerance
 // (the tilt acts over the distance to the couch), and not otherwise. Here
-// the tolerances are set so that only the couch rule can ask for it.
+// the tolerances are set so that only the couch rule can ask for it. (The
+// fusion after the adjustment, for a map whose origin is not tied to a plane
+// in the adjustment: room planes off here; see the next test for them.)
 TEST(RoomMapOrigin, ARoomFrameWeakAtTheCouchTakesTheTiltOfTheMarkersCoplanarWithTheOrigin) {
   const PoorOriginCase& c = GetPoorOriginCase();
   RoomMapBuildOptions options = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
+  options.use_room_planes = false;
   options.max_room_frame_tilt_sigma_deg = 90;     // the tilt never weak by itself
   options.max_room_frame_couch_sigma_mm = 1e-3;   // the room frame always weak at the couch
   const RoomMapBuildResult fused = BuildRoomMap(Sequence::Open(c.folder.room_dir), c.folder.config, options);
@@ -162,6 +165,45 @@ TEST(RoomMapOrigin, ARoomFrameWeakAtTheCouchTakesTheTiltOfTheMarkersCoplanarWith
       EXPECT_LT(e, 3 * fused.report.room_frame_couch_sigma_mm + 2) << "marker " << m.id;
     }
   }
+}
+
+// The same case as `arpos plan` builds it: the origin, small and rarely
+// seen, is tied to its floor in the adjustment, whose depth in every view of
+// it holds the origin's tilt. The reported tilt is narrower than the
+// origin's corners alone give, and the markers near the couch are within
+// what the plan says (3 sigma + 2 mm) and closer than without the planes.
+TEST(RoomMapOrigin, TheOriginsPlaneInDepthHoldsItsTiltInTheAdjustment) {
+  const PoorOriginCase& c = GetPoorOriginCase();
+  RoomMapBuildOptions options = MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions());
+  const RoomMapBuildResult tied = BuildRoomMap(Sequence::Open(c.folder.room_dir), c.folder.config, options);
+  std::printf("%s", tied.report.ToText().c_str());
+  ASSERT_GE(tied.report.origin_plane_views, 10);
+  options.use_room_planes = false;
+  options.fuse_tilt_when_weak_at_couch = false;
+  options.max_room_frame_tilt_sigma_deg = 90;  // the origin's corners alone
+  const RoomMapBuildResult alone = BuildRoomMap(Sequence::Open(c.folder.room_dir), c.folder.config, options);
+  EXPECT_EQ(alone.report.origin_plane_views, 0);
+  EXPECT_LT(tied.report.room_frame_tilt_sigma_deg, 0.5 * alone.report.room_frame_tilt_sigma_deg);
+  const Eigen::Vector3d couch = options.couch_point_in_room;
+  auto near_error = [&](const RoomMap& map, double* max_excess) {
+    double sum = 0;
+    int n = 0;
+    for (const RoomMapMarkerEntry& m : map.markers) {
+      for (const auto& t : c.truth.room_markers) {
+        if (t.id != m.id || (t.parent_from_marker.translation - couch).norm() > 1.5) continue;
+        const double e = (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000;
+        if (max_excess) *max_excess = std::max(*max_excess, e - (3 * tied.report.room_frame_couch_sigma_mm + 2));
+        sum += e;
+        ++n;
+      }
+    }
+    return n ? sum / n : 1e9;
+  };
+  double excess = -1e9;
+  const double with_planes = near_error(tied.map, &excess), without = near_error(alone.map, nullptr);
+  std::printf("markers near the couch: %.2f mm with the planes, %.2f mm without\n", with_planes, without);
+  EXPECT_LT(excess, 0.0);
+  EXPECT_LT(with_planes, without);
 }
 
 // The couch-top exclusion box is in the room frame; a map started from a

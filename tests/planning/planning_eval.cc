@@ -100,6 +100,11 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
     if (std::getenv("NO_DEPTH_CHECK")) build_options.estimate_depth_correction = false;
     if (std::getenv("SUPPORT")) build_options.use_support_plane = true;
+    if (std::getenv("NO_BA_PLANES")) build_options.use_room_planes = false;
+    if (std::getenv("NO_ORIGIN_PLANE")) build_options.room_plane_for_origin = false;
+    if (std::getenv("NO_PLANE_TIES")) build_options.room_plane_ties_markers = false;
+    if (const char* v = std::getenv("PLANE_TILT_DEG")) build_options.room_plane_marker_tilt_deg = std::atof(v);
+    if (const char* v = std::getenv("BA_PLANE_EFF")) build_options.room_plane_max_effective = std::atof(v);
     if (std::getenv("NO_COPLANAR")) build_options.use_coplanar_markers = false;
     if (std::getenv("TILT_GATE_ONLY")) build_options.fuse_tilt_when_weak_at_couch = false;
     if (const char* v = std::getenv("SUPPORT_HW")) build_options.support_plane_half_width_m = std::atof(v);
