@@ -38,7 +38,6 @@ void Lap(double* mark, double* bucket) {
   *mark = now;
 }
 
-
 }  // namespace
 
 const char* LocalizationStatusName(LocalizationStatus status) {
