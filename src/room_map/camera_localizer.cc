@@ -153,12 +153,7 @@ struct CameraLocalizer::Impl {
   std::optional<Rigid3d> search_start;
 
   // The map's planes: markers lying in one plane (room frame).
-  struct RoomPlane {
-    Eigen::Vector3d normal;  // unit
-    double offset = 0;       // normal . x = offset on the plane
-    std::vector<Eigen::Vector3d> marker_centres;
-  };
-  std::vector<RoomPlane> planes;
+  std::vector<MarkerPlane> planes;
   // Where the planes' and the surface's depth is read.
   DepthSampleGrid depth_grid;
   // The map's still surface (empty: not used).
@@ -194,10 +189,8 @@ struct CameraLocalizer::Impl {
       centres.push_back(m.room_from_marker.translation);
       corners.push_back(m.corners_in_room);
     }
-    for (MarkerPlane& p : FindMarkerPlanes(normals, centres, corners, options.room_plane_min_markers,
-                                           options.room_plane_min_spread_m)) {
-      planes.push_back({p.normal, p.offset, std::move(p.marker_centres)});
-    }
+    planes = FindMarkerPlanes(normals, centres, corners, options.room_plane_min_markers,
+                              options.room_plane_min_spread_m);
   }
 
   // Depth pixels on the map's planes and its surface at `camera_from_room`
@@ -218,7 +211,6 @@ struct CameraLocalizer::Impl {
       int point;
     };
     std::array<std::vector<SurfaceSample>, 3> on_surface;
-    const double support2 = options.room_plane_support_m * options.room_plane_support_m;
     for (size_t i = 0; i < depth_grid.ray.size(); ++i) {
       const uint16_t raw = depth_image->at<uint16_t>(depth_grid.px[i]);
       if (raw == 0) continue;
@@ -226,18 +218,13 @@ struct CameraLocalizer::Impl {
       const Eigen::Vector3d xc(depth_grid.ray[i].x() * z, depth_grid.ray[i].y() * z, z);
       const Eigen::Vector3d x = room_from_camera * xc;
       const double gate = std::max(options.room_plane_gate_m, 3 * DepthSigma(z));
-      bool taken = false;
-      for (size_t p = 0; p < planes.size() && !taken; ++p) {
-        if (std::abs(planes[p].normal.dot(x) - planes[p].offset) > gate) continue;
-        bool near = false;
-        for (const auto& c : planes[p].marker_centres) near |= (x - c).squaredNorm() < support2;
-        if (near) {
-          on[p].push_back({i, z});
-          on_points[p].push_back(xc);
-          taken = true;
-        }
+      const int p = PlaneNear(planes, x, gate, options.room_plane_support_m);
+      if (p >= 0) {
+        on[p].push_back({i, z});
+        on_points[p].push_back(xc);
+        continue;
       }
-      if (taken || surface.empty()) continue;
+      if (surface.empty()) continue;
       const int s = surface.Near(x);
       if (s < 0) continue;
       const Eigen::Vector3d& n = surface.normal(s);

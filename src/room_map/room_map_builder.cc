@@ -1280,7 +1280,6 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     const DepthCorrection& correction = result.map.depth_correction;
     const bool correct = !correction.IsIdentity();
-    const double support2 = options.room_plane_support_m * options.room_plane_support_m;
     int samples_used = 0, views_used = 0;
     for (size_t c = 0; c < ba.camera_from_room.size(); ++c) {
       const FrameData& f = frames[camera_frame[c]];
@@ -1300,16 +1299,11 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         const Eigen::Vector3d xc(r.x() * z, r.y() * z, z);
         const Eigen::Vector3d x = room_from_camera * xc;
         const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
-        for (size_t p = 0; p < planes.size(); ++p) {
-          if (std::abs(planes[p].normal.dot(x) - planes[p].offset) > gate) continue;
-          bool near = false;
-          for (const auto& m : planes[p].marker_centres) near |= (x - m).squaredNorm() < support2;
-          if (!near) continue;
-          on[p].push_back(i);
-          on_points[p].push_back(xc);
-          on_sigma[p].push_back(joint_options.DepthSigmaM(z));
-          break;
-        }
+        const int p = PlaneNear(planes, x, gate, options.room_plane_support_m);
+        if (p < 0) continue;
+        on[p].push_back(i);
+        on_points[p].push_back(xc);
+        on_sigma[p].push_back(joint_options.DepthSigmaM(z));
       }
       for (size_t p = 0; p < planes.size(); ++p) {
         if (static_cast<int>(on[p].size()) < options.room_plane_min_samples) continue;

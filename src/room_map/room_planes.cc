@@ -66,6 +66,17 @@ std::vector<MarkerPlane> FindMarkerPlanes(const std::vector<Eigen::Vector3d>& no
   return planes;
 }
 
+int PlaneNear(const std::vector<MarkerPlane>& planes, const Eigen::Vector3d& x, double gate_m, double support_m) {
+  const double support2 = support_m * support_m;
+  for (size_t p = 0; p < planes.size(); ++p) {
+    if (std::abs(planes[p].normal.dot(x) - planes[p].offset) > gate_m) continue;
+    for (const Eigen::Vector3d& c : planes[p].marker_centres) {
+      if ((x - c).squaredNorm() < support2) return static_cast<int>(p);
+    }
+  }
+  return -1;
+}
+
 std::vector<size_t> PointsOnViewedPlane(const std::vector<Eigen::Vector3d>& points,
                                         const std::vector<double>& sigma_z, Eigen::Vector3d n, double d) {
   std::vector<double> weight(points.size());

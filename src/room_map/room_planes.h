@@ -43,6 +43,10 @@ std::vector<MarkerPlane> FindMarkerPlanes(const std::vector<Eigen::Vector3d>& no
                                           const std::vector<std::array<Eigen::Vector3d, 4>>& corners,
                                           int min_markers, double min_spread_m);
 
+/// The first of `planes` that room point `x` lies on: within `gate_m` of it
+/// and within `support_m` of one of its markers' centres; -1 if none.
+int PlaneNear(const std::vector<MarkerPlane>& planes, const Eigen::Vector3d& x, double gate_m, double support_m);
+
 /// Of the candidate points of one view (camera frame) near a mapped plane
 /// (n . x = d in the camera frame, from the view's pose), those on the plane
 /// as this view's depth shows it: fitted to the candidates with those beyond
