@@ -1240,9 +1240,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
     }
   }
-  if (options.use_room_planes) {
-    // The room's planes (room_planes.h) at the map's current state, and each
-    // frame's depth pixels on them.
+  // The room's planes (room_planes.h) at the map's current state, and each
+  // frame's depth pixels on them; with `from_depth`, the planes found in
+  // the depth too (after the first adjustment: the frames' first poses,
+  // from a few keypoints where no marker is seen, can be off by centimetres
+  // and would split a wall in two).
+  auto set_room_planes = [&](bool from_depth) {
     std::vector<Eigen::Vector3d> normals, centres;
     std::vector<std::array<Eigen::Vector3d, 4>> corners;
     const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
@@ -1267,6 +1270,32 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       p.marker_centres = {centres[origin_slot]};
       planes.push_back(std::move(p));
     }
+    const DepthCorrection& correction = result.map.depth_correction;
+    const bool correct = !correction.IsIdentity();
+    int depth_planes = 0;
+    if (from_depth) {
+      std::vector<Eigen::Vector3d> points;
+      std::vector<int> views;
+      for (size_t c = 0; c < ba.camera_from_room.size(); ++c) {
+        const FrameData& f = frames[camera_frame[c]];
+        const Rigid3d room_from_camera = ba.camera_from_room[c].Inverse();
+        for (size_t i = 0; i < f.grid_z.size(); ++i) {
+          double z = f.grid_z[i];
+          if (!(z > 0) || z > options.room_plane_depth_max_m) continue;
+          const Eigen::Vector2d& r = plane_grid.ray[i];
+          if (correct) z = correction.TrueDepth(z, r.x(), r.y());
+          const Eigen::Vector3d x = room_from_camera * Eigen::Vector3d(r.x() * z, r.y() * z, z);
+          const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
+          if (PlaneNear(planes, x, gate, options.room_plane_support_m) >= 0) continue;  // on a marker plane
+          points.push_back(x);
+          views.push_back(static_cast<int>(c));
+        }
+      }
+      for (MarkerPlane& p : planes) {  // (AddDepthPlanes: why not the origin's)
+        p.extend_in_depth = std::find(p.markers.begin(), p.markers.end(), origin_slot) == p.markers.end();
+      }
+      depth_planes = AddDepthPlanes(points, views, options.depth_planes, &planes);
+    }
     ba.planes.clear();
     ba.plane_observations.clear();
     for (const MarkerPlane& p : planes) {
@@ -1278,8 +1307,6 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       b.tilt_sigma_rad = RadFromDeg(options.room_plane_marker_tilt_deg);
       ba.planes.push_back(std::move(b));
     }
-    const DepthCorrection& correction = result.map.depth_correction;
-    const bool correct = !correction.IsIdentity();
     int samples_used = 0, views_used = 0;
     for (size_t c = 0; c < ba.camera_from_room.size(); ++c) {
       const FrameData& f = frames[camera_frame[c]];
@@ -1330,9 +1357,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         ba.plane_observations.push_back(std::move(o));
       }
     }
-    report.room_planes = StringPrintf("%zu room plane(s) in the adjustment, %d views, %d depth samples",
-                                      planes.size(), views_used, samples_used);
-  }
+    report.room_planes = StringPrintf("%zu room plane(s) in the adjustment (%d found in depth alone), %d views, %d depth samples",
+                                      planes.size(), depth_planes, views_used, samples_used);
+  };
+  if (options.use_room_planes) set_room_planes(false);
   report.joint_adjustment = RunBundleAdjustment(&ba, joint_options);
   // Drop outlier observations and adjust again.
   {
@@ -1383,8 +1411,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     ba.landmarks_in_room = std::move(new_landmarks);
     ba.keypoint_observations = std::move(remapped);
     ba.marker_observations = std::move(kept_markers);
-    if (changed) {
-      progress("bundle adjustment (outliers removed)", 0.85);
+    const bool depth_planes = options.use_room_planes && options.room_planes_from_depth;
+    if (depth_planes) set_room_planes(true);
+    if (changed || depth_planes) {
+      progress(depth_planes ? "bundle adjustment (outliers removed, planes found in depth)"
+                            : "bundle adjustment (outliers removed)",
+               0.85);
       const BaSummary second = RunBundleAdjustment(&ba, joint_options);
       report.joint_adjustment.iterations += second.iterations;
       report.joint_adjustment.seconds += second.seconds;

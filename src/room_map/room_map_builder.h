@@ -37,6 +37,7 @@
 #include "room_map/bundle_adjustment.h"
 #include "room_map/keypoints.h"
 #include "room_map/room_map.h"
+#include "room_map/room_planes.h"
 #include "sensor/case_config.h"
 #include "sensor/sequence.h"
 
@@ -183,6 +184,16 @@ struct RoomMapBuildOptions {
   int room_plane_min_samples = 40;
   int room_plane_max_samples = 200;
   double room_plane_max_effective = 25;
+  /// Planes found in the depth itself join them after the first adjustment
+  /// (room_planes.h, AddDepthPlanes; depth read up to
+  /// room_plane_depth_max_m): walls without markers, the floor beyond its
+  /// markers' reach. A frame that sees the floor and a wall has its whole
+  /// turn tied to the room, not only its tilt, so the chain of frames from a
+  /// far origin to the couch cannot turn about the vertical. The origin's
+  /// own plane is not extended (AddDepthPlanes says why).
+  bool room_planes_from_depth = true;
+  double room_plane_depth_max_m = 3.5;
+  DepthPlaneOptions depth_planes;
 
   /// Observations with a reprojection error above this many sigmas after the
   /// first joint adjustment are dropped before the second.

@@ -104,6 +104,9 @@ int main(int argc, char** argv) {
     if (std::getenv("NO_ORIGIN_PLANE")) build_options.room_plane_for_origin = false;
     if (std::getenv("NO_PLANE_TIES")) build_options.room_plane_ties_markers = false;
     if (const char* v = std::getenv("PLANE_TILT_DEG")) build_options.room_plane_marker_tilt_deg = std::atof(v);
+    if (std::getenv("NO_DEPTH_PLANES")) build_options.room_planes_from_depth = false;
+    if (const char* v = std::getenv("DEPTH_PLANE_MAX_M")) build_options.room_plane_depth_max_m = std::atof(v);
+    if (const char* v = std::getenv("DEPTH_PLANE_EXTENT_M")) build_options.depth_planes.min_extent_m = std::atof(v);
     if (const char* v = std::getenv("BA_PLANE_EFF")) build_options.room_plane_max_effective = std::atof(v);
     if (std::getenv("NO_COPLANAR")) build_options.use_coplanar_markers = false;
     if (std::getenv("TILT_GATE_ONLY")) build_options.fuse_tilt_when_weak_at_couch = false;

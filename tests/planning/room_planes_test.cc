@@ -1,5 +1,6 @@
-// The room's planes: grouping markers by plane, and the plane-depth terms of
-// the room map's bundle adjustment on a synthetic floor.
+// The room's planes: grouping markers by plane, finding planes in depth, and
+// the plane-depth terms of the room map's bundle adjustment on a synthetic
+// floor.
 #include <cmath>
 #include <random>
 
@@ -72,6 +73,67 @@ TEST(RoomPlanes, ThePlaneAViewShowsKeepsItsPointsAndLeavesOutTheFootOfAWall) {
   for (size_t k : kept) (k < 400 ? plane : band)++;
   EXPECT_GT(plane, 390);
   EXPECT_EQ(band, 0);
+}
+
+TEST(RoomPlanes, AWallWithoutMarkersIsFoundInDepthAndTheFloorReachesBeyondItsMarkers) {
+  // Depth of ten views (room frame, 5 mm noise): a floor (z = 0, 4 x 5 m)
+  // with two markers near one corner, a wall (x = 3, 5 m long, 2.5 m high)
+  // and a 0.4 m box on the floor; the origin marker alone on the far wall
+  // (y = 6), its plane from its own normal, 2 deg off, not to be extended.
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 0.005);
+  std::uniform_real_distribution<double> unit(0, 1);
+  std::vector<Eigen::Vector3d> points;
+  std::vector<int> views;
+  auto add = [&](const Eigen::Vector3d& p, int view) {
+    points.push_back(p + Eigen::Vector3d(noise(rng), noise(rng), noise(rng)));
+    views.push_back(view);
+  };
+  for (int view = 0; view < 10; ++view) {
+    for (int i = 0; i < 1500; ++i) {
+      const double u = unit(rng), v = unit(rng);
+      add(Eigen::Vector3d(-1 + 4 * u, -1 + 5 * v, 0), view);          // floor
+      add(Eigen::Vector3d(3, -1 + 5 * u, 2.5 * v), view);             // wall
+      add(Eigen::Vector3d(-1 + 4 * u, 6, 2.5 * v), view);             // far wall
+      add(Eigen::Vector3d(0.3 + 0.4 * u, 0.3 + 0.4 * v, 0.4), view);  // box top
+      add(Eigen::Vector3d(0.3, 0.3 + 0.4 * u, 0.4 * v), view);        // box side
+    }
+  }
+  MarkerPlane floor;
+  floor.normal = Eigen::Vector3d::UnitZ();
+  floor.markers = {1, 2};
+  floor.marker_centres = {Eigen::Vector3d(-0.8, -0.8, 0.001), Eigen::Vector3d(-0.2, -0.7, -0.001)};
+  MarkerPlane origin;
+  origin.normal = Eigen::AngleAxisd(RadFromDeg(2.0), Eigen::Vector3d::UnitZ()) * Eigen::Vector3d(0, -1, 0);
+  origin.offset = origin.normal.dot(Eigen::Vector3d(1, 6, 1.2));
+  origin.markers = {0};
+  origin.marker_centres = {Eigen::Vector3d(1, 6, 1.2)};
+  origin.extend_in_depth = false;
+  std::vector<MarkerPlane> planes = {floor, origin};
+  DepthPlaneOptions options;
+  EXPECT_EQ(AddDepthPlanes(points, views, options, &planes), 2)
+      << "the wall, and the far wall beside the origin's own plane; the floor is the markers'";
+  ASSERT_EQ(planes.size(), 4u);
+  EXPECT_FALSE(planes[0].cells.empty());
+  EXPECT_TRUE(planes[1].cells.empty()) << "the origin's plane is left as it is";
+  EXPECT_LT(planes[1].normal.dot(Eigen::Vector3d(0, -1, 0)), std::cos(RadFromDeg(1.9)));
+  int wall = -1, far_wall = -1;
+  for (int p = 2; p < 4; ++p) (std::abs(planes[p].normal.x()) > 0.9 ? wall : far_wall) = p;
+  ASSERT_GE(wall, 0);
+  ASSERT_GE(far_wall, 0);
+  EXPECT_GT(std::abs(planes[wall].normal.x()), std::cos(RadFromDeg(0.1)));
+  EXPECT_NEAR(planes[wall].offset * planes[wall].normal.x(), 3.0, 0.005);
+  EXPECT_GT(std::abs(planes[far_wall].normal.y()), std::cos(RadFromDeg(0.1)));
+  // A point of the wall, of the floor 4 m from its markers: on their planes;
+  // the box's top: on none.
+  EXPECT_EQ(PlaneNear(planes, Eigen::Vector3d(3, 3.8, 2.2), 0.03, 2.0), wall);
+  EXPECT_EQ(PlaneNear(planes, Eigen::Vector3d(2.8, 3.5, 0.01), 0.03, 2.0), 0);
+  EXPECT_EQ(PlaneNear(planes, Eigen::Vector3d(0.5, 0.5, 0.4), 0.03, 2.0), -1);
+  // Seen by fewer views than asked: no plane.
+  std::vector<MarkerPlane> none;
+  options.min_views = 11;
+  EXPECT_EQ(AddDepthPlanes(points, views, options, &none), 0);
+  EXPECT_TRUE(none.empty());
 }
 
 // A floor with the origin marker at one end and markers 1.5 and 3 m away,
