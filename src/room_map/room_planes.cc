@@ -164,13 +164,12 @@ int AddDepthPlanes(const std::vector<Eigen::Vector3d>& points, const std::vector
     }
     std::unordered_map<int64_t, size_t> in_slot;
     for (size_t k : in) in_slot.emplace(CellKey(cells[k].centroid(), s), k);
-    std::unordered_map<int64_t, int> component;
+    std::unordered_set<int64_t> component;  // cells already in a patch
     std::vector<size_t> patch;
     for (size_t k : in) {
       const int64_t key0 = CellKey(cells[k].centroid(), s);
-      if (component.count(key0)) continue;
+      if (!component.insert(key0).second) continue;
       std::vector<size_t> members, stack{k};
-      component[key0] = 1;
       while (!stack.empty()) {
         const size_t m = stack.back();
         stack.pop_back();
@@ -181,8 +180,7 @@ int AddDepthPlanes(const std::vector<Eigen::Vector3d>& points, const std::vector
               const Eigen::Vector3d q = (cells[m].index.cast<double>() + Eigen::Vector3d(dx + 0.5, dy + 0.5, dz + 0.5)) * s;
               const int64_t key = CellKey(q, s);
               auto found_cell = in_slot.find(key);
-              if (found_cell == in_slot.end() || component.count(key)) continue;
-              component[key] = 1;
+              if (found_cell == in_slot.end() || !component.insert(key).second) continue;
               stack.push_back(found_cell->second);
             }
           }
@@ -194,15 +192,14 @@ int AddDepthPlanes(const std::vector<Eigen::Vector3d>& points, const std::vector
     std::unordered_set<size_t> taken(in.begin(), in.end());
     live.erase(std::remove_if(live.begin(), live.end(), [&](size_t k) { return taken.count(k) > 0; }), live.end());
     std::vector<Eigen::Vector3d> pts;
-    std::vector<double> w;
     std::vector<int> seen_by;
     for (size_t k : patch) {
       pts.push_back(cells[k].centroid());
-      w.push_back(cells[k].count);
       seen_by.insert(seen_by.end(), cells[k].views.begin(), cells[k].views.end());
     }
     std::sort(seen_by.begin(), seen_by.end());
     seen_by.erase(std::unique(seen_by.begin(), seen_by.end()), seen_by.end());
+    // The patch's extent: each cell once, however many points it holds.
     const std::optional<WeightedPlane> fit = FitWeightedPlane(pts, std::vector<double>(pts.size(), 1.0));
     if (!fit || static_cast<int>(seen_by.size()) < options.min_views) continue;
     const double narrow = std::sqrt(std::max(0.0, fit->spread2(1))) * std::sqrt(12.0);
