@@ -1270,26 +1270,39 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       p.marker_centres = {centres[origin_slot]};
       planes.push_back(std::move(p));
     }
+    // Each depth of camera c's grid (corrected when the depth needed it):
+    // fn(grid index, depth, point in the camera, point in the room).
     const DepthCorrection& correction = result.map.depth_correction;
     const bool correct = !correction.IsIdentity();
+    auto for_each_grid_point = [&](size_t c, auto&& fn) {
+      const FrameData& f = frames[camera_frame[c]];
+      const Rigid3d room_from_camera = ba.camera_from_room[c].Inverse();
+      for (size_t i = 0; i < f.grid_z.size(); ++i) {
+        double z = f.grid_z[i];
+        if (!(z > 0)) continue;
+        const Eigen::Vector2d& r = plane_grid.ray[i];
+        if (correct) z = correction.TrueDepth(z, r.x(), r.y());
+        const Eigen::Vector3d xc(r.x() * z, r.y() * z, z);
+        fn(i, z, xc, room_from_camera * xc);
+      }
+    };
+    // The plane a room point at depth z lies on (PlaneNear), or -1.
+    auto plane_near = [&](const Eigen::Vector3d& x, double z) {
+      const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
+      return PlaneNear(planes, x, gate, options.room_plane_support_m);
+    };
     int depth_planes = 0;
     if (from_depth) {
       std::vector<Eigen::Vector3d> points;
       std::vector<int> views;
       for (size_t c = 0; c < ba.camera_from_room.size(); ++c) {
-        const FrameData& f = frames[camera_frame[c]];
-        const Rigid3d room_from_camera = ba.camera_from_room[c].Inverse();
-        for (size_t i = 0; i < f.grid_z.size(); ++i) {
-          double z = f.grid_z[i];
-          if (!(z > 0) || z > options.room_plane_depth_max_m) continue;
-          const Eigen::Vector2d& r = plane_grid.ray[i];
-          if (correct) z = correction.TrueDepth(z, r.x(), r.y());
-          const Eigen::Vector3d x = room_from_camera * Eigen::Vector3d(r.x() * z, r.y() * z, z);
-          const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
-          if (PlaneNear(planes, x, gate, options.room_plane_support_m) >= 0) continue;  // on a marker plane
+        const std::vector<float>& grid_z = frames[camera_frame[c]].grid_z;
+        for_each_grid_point(c, [&](size_t i, double z, const Eigen::Vector3d&, const Eigen::Vector3d& x) {
+          if (grid_z[i] > options.room_plane_depth_max_m) return;  // (the depth as read)
+          if (plane_near(x, z) >= 0) return;                        // on a marker plane
           points.push_back(x);
           views.push_back(static_cast<int>(c));
-        }
+        });
       }
       for (MarkerPlane& p : planes) {  // (AddDepthPlanes: why not the origin's)
         p.extend_in_depth = std::find(p.markers.begin(), p.markers.end(), origin_slot) == p.markers.end();
@@ -1312,26 +1325,18 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       const FrameData& f = frames[camera_frame[c]];
       if (f.grid_z.empty()) continue;
       const Rigid3d& camera_from_room = ba.camera_from_room[c];
-      const Rigid3d room_from_camera = camera_from_room.Inverse();
       std::vector<std::vector<size_t>> on(planes.size());
       std::vector<std::vector<Eigen::Vector3d>> on_points(planes.size());
       std::vector<std::vector<double>> on_sigma(planes.size());
       std::vector<double> z_of(f.grid_z.size(), 0.0);
-      for (size_t i = 0; i < f.grid_z.size(); ++i) {
-        double z = f.grid_z[i];
-        if (!(z > 0)) continue;
-        const Eigen::Vector2d& r = plane_grid.ray[i];
-        if (correct) z = correction.TrueDepth(z, r.x(), r.y());
+      for_each_grid_point(c, [&](size_t i, double z, const Eigen::Vector3d& xc, const Eigen::Vector3d& x) {
         z_of[i] = z;
-        const Eigen::Vector3d xc(r.x() * z, r.y() * z, z);
-        const Eigen::Vector3d x = room_from_camera * xc;
-        const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
-        const int p = PlaneNear(planes, x, gate, options.room_plane_support_m);
-        if (p < 0) continue;
+        const int p = plane_near(x, z);
+        if (p < 0) return;
         on[p].push_back(i);
         on_points[p].push_back(xc);
         on_sigma[p].push_back(joint_options.DepthSigmaM(z));
-      }
+      });
       for (size_t p = 0; p < planes.size(); ++p) {
         if (static_cast<int>(on[p].size()) < options.room_plane_min_samples) continue;
         const Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
