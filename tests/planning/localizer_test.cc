@@ -385,7 +385,9 @@ TEST(Localizer, LandmarksPlacedAfterTheAdjustmentHelpKeypointOnlyFrames) {
   EXPECT_GE(more_ok, few_ok);
   EXPECT_LT(more_mean, 6.0);
   EXPECT_LT(more_max, 15.0);
-  if (few_ok == more_ok) EXPECT_LT(more_mean, few_mean);
+  if (few_ok == more_ok) {
+    EXPECT_LT(more_mean, few_mean);
+  }
 }
 
 // Through a lens with distortion the keypoints sit where the lens puts

@@ -60,16 +60,7 @@ void WriteSmallCase(const std::string& profile, int room_frames, int tracking_fr
   // tracking 300 over 10 s); the case gets `room_frames` spread over the
   // whole room walk and `tracking_frames` consecutive frames, so tracking
   // runs at the real frame rate while the case stays small.
-  sim::SimulationOptions o;
-  o.profile = profile;
-  o.seed = 7;
-  o.body_mesh_path = BodyMeshPath();
-  o.room_frames = 300;
-  o.body_scan_frames = 1;
-  o.tracking_frames = 300;
-  o.tracking_sequences = 1;
-  if (lens) o.distortion = kKinectLens;
-  const sim::Simulator simulator(o);
+  const sim::Simulator simulator(SmallCaseSimulationOptions(profile, lens));
   CreateDirectories(root);
   CaseConfig config;
   config.camera = simulator.profile().intrinsics;
@@ -104,6 +95,19 @@ void WriteSmallCase(const std::string& profile, int room_frames, int tracking_fr
 }
 
 }  // namespace
+
+sim::SimulationOptions SmallCaseSimulationOptions(const std::string& profile, bool lens) {
+  sim::SimulationOptions o;
+  o.profile = profile;
+  o.seed = 7;
+  o.body_mesh_path = BodyMeshPath();
+  o.room_frames = 300;
+  o.body_scan_frames = 1;
+  o.tracking_frames = 300;
+  o.tracking_sequences = 1;
+  if (lens) o.distortion = kKinectLens;
+  return o;
+}
 
 const SmallCase& GetSmallCase(const std::string& profile, int room_frames, int tracking_frames,
                               bool tracking_from_room, bool lens) {

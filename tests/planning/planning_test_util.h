@@ -10,6 +10,7 @@
 #include "room_map/room_map_builder.h"
 #include "sensor/case_folder.h"
 #include "simulation/simulation_truth.h"
+#include "simulation/simulator.h"
 
 namespace arpos::testing {
 
@@ -28,6 +29,10 @@ struct SmallCase {
 /// ~15-30 s). `lens`: rendered through a Kinect-like lens (kKinectLens).
 const SmallCase& GetSmallCase(const std::string& profile = "xtion", int room_frames = 40,
                               int tracking_frames = 12, bool tracking_from_room = true, bool lens = false);
+
+/// The simulator options GetSmallCase's cases are rendered with (the whole
+/// walks; the case keeps some of their frames).
+sim::SimulationOptions SmallCaseSimulationOptions(const std::string& profile, bool lens = false);
 
 /// The distortion of a Kinect's colour camera (OpenCV k1 k2 p1 p2 k3).
 inline constexpr std::array<double, 5> kKinectLens = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633};
