@@ -1154,6 +1154,26 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   rebuild_cameras();
   if (!marker_slot.count(origin_id)) {
     const std::optional<Rigid3d> origin = place_from_views(origin_id);
+    // Sharp, whole views of the origin in frames the rest of the map could
+    // not place (no marker and too few keypoints in common with the frames
+    // around them): a link to record, not a better view.
+    int sharp_views = 0, sharp_views_placed = 0;
+    for (const auto& f : frames) {
+      for (const auto& m : f.markers) {
+        if (m.id != origin_id) continue;
+        ++sharp_views;
+        sharp_views_placed += f.posed;
+      }
+    }
+    if (!origin && sharp_views > 0 && sharp_views_placed == 0) {
+      ARPOS_INPUT_ERROR(sequence.folder().string()
+                        << ": the origin marker (id " << origin_id << ") is seen sharply in " << sharp_views
+                        << " frame(s), but none of them could be tied to the rest of the map: they show no "
+                           "other room marker and share too few keypoints with the frames before and after "
+                           "them (a bare floor or wall around the origin); record the room again with another "
+                           "room marker in view together with the origin marker, or moving slowly from the "
+                           "mapped markers to it over textured surroundings");
+    }
     if (!origin) {
       ARPOS_INPUT_ERROR(sequence.folder().string()
                         << ": the origin marker (id " << origin_id
