@@ -1169,7 +1169,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       ARPOS_INPUT_ERROR(sequence.folder().string()
                         << ": the origin marker (id " << origin_id << ") is seen sharply in " << sharp_views
                         << " frame(s), but none of them could be tied to the rest of the map: they show no "
-                           "other room marker and share too few keypoints with the frames before and after "
+                           "marker of the map and share too few keypoints with the frames placed around "
                            "them (a bare floor or wall around the origin); record the room again with another "
                            "room marker in view together with the origin marker, or moving slowly from the "
                            "mapped markers to it over textured surroundings");

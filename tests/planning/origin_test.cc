@@ -144,9 +144,10 @@ TEST(RoomMapOrigin, RarelySeenSmallObliqueOriginStillGivesARoomFrame) {
 // Seed 13 with an sRGB camera: the origin marker is seen sharply, but only
 // in two frames at the start of the walk and six at its end, each time
 // alone on a bare tiled floor (19-29 px), and the frames that show it share
-// too few keypoints with the mapped ones to be placed. The plan stops with an input error that says so and what to
-// record (it used to blame the views: "never fully and sharply"). If the
-// builder learns to tie such frames, this test should expect a map instead.
+// too few keypoints with the mapped ones to be placed. The plan stops with
+// an input error that says so and what to record (it used to blame the
+// views: "never fully and sharply"). If the builder learns to tie such
+// frames, this test should expect a map instead.
 TEST(RoomMapOrigin, AnOriginSeenOnlyInFramesTheMapCannotTieIsNamedAsSuch) {
   const PoorOriginCase c = MakeRandomRoomCase(13, "untied_origin", "srgb");
   try {
