@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "geometry/so3.h"
 
@@ -68,11 +69,22 @@ std::vector<MarkerPlane> FindMarkerPlanes(const std::vector<Eigen::Vector3d>& no
   return planes;
 }
 
-int64_t CellKey(const Eigen::Vector3d& x, double cell_m) {
-  // 21 bits an axis: +-104 km at 0.1 m.
-  auto axis = [&](double v) { return static_cast<int64_t>(std::floor(v / cell_m)) & ((int64_t{1} << 21) - 1); };
-  return (axis(x.x()) << 42) | (axis(x.y()) << 21) | axis(x.z());
+namespace {
+
+// The key of the cell with integer index `i` (21 bits an axis: +-104 km at
+// 0.1 m).
+int64_t PackCell(const Eigen::Vector3i& i) {
+  auto axis = [](int v) { return static_cast<int64_t>(v) & ((int64_t{1} << 21) - 1); };
+  return (axis(i.x()) << 42) | (axis(i.y()) << 21) | axis(i.z());
 }
+
+Eigen::Vector3i CellIndex(const Eigen::Vector3d& x, double cell_m) {
+  return (x / cell_m).array().floor().cast<int>();
+}
+
+}  // namespace
+
+int64_t CellKey(const Eigen::Vector3d& x, double cell_m) { return PackCell(CellIndex(x, cell_m)); }
 
 int PlaneNear(const std::vector<MarkerPlane>& planes, const Eigen::Vector3d& x, double gate_m, double support_m) {
   const double support2 = support_m * support_m;
@@ -90,6 +102,7 @@ namespace {
 
 struct Cell {
   Eigen::Vector3i index;
+  int64_t key = 0;
   Eigen::Vector3d sum = Eigen::Vector3d::Zero();
   int count = 0;
   std::vector<int> views;  // distinct, ascending as the points come
@@ -105,18 +118,18 @@ int AddDepthPlanes(const std::vector<Eigen::Vector3d>& points, const std::vector
   std::vector<Cell> cells;
   for (size_t i = 0; i < points.size(); ++i) {
     if (!points[i].allFinite()) continue;
-    const int64_t key = CellKey(points[i], s);
+    const Eigen::Vector3i index = CellIndex(points[i], s);
+    const int64_t key = PackCell(index);
     auto [it, fresh] = slot.emplace(key, cells.size());
     if (fresh) {
       cells.emplace_back();
-      cells.back().index = (points[i] / s).array().floor().cast<int>();
+      cells.back().index = index;
+      cells.back().key = key;
     }
     Cell& c = cells[it->second];
     c.sum += points[i];
     ++c.count;
-    if (c.views.empty() || std::find(c.views.begin(), c.views.end(), views[i]) == c.views.end()) {
-      c.views.push_back(views[i]);
-    }
+    if (std::find(c.views.begin(), c.views.end(), views[i]) == c.views.end()) c.views.push_back(views[i]);
   }
   std::vector<size_t> live;  // cells with enough points, not yet in a plane
   for (size_t i = 0; i < cells.size(); ++i) {
@@ -163,12 +176,11 @@ int AddDepthPlanes(const std::vector<Eigen::Vector3d>& points, const std::vector
       best_d = best_n.dot(fit->centroid);
     }
     std::unordered_map<int64_t, size_t> in_slot;
-    for (size_t k : in) in_slot.emplace(CellKey(cells[k].centroid(), s), k);
+    for (size_t k : in) in_slot.emplace(cells[k].key, k);
     std::unordered_set<int64_t> component;  // cells already in a patch
     std::vector<size_t> patch;
     for (size_t k : in) {
-      const int64_t key0 = CellKey(cells[k].centroid(), s);
-      if (!component.insert(key0).second) continue;
+      if (!component.insert(cells[k].key).second) continue;
       std::vector<size_t> members, stack{k};
       while (!stack.empty()) {
         const size_t m = stack.back();
@@ -177,8 +189,7 @@ int AddDepthPlanes(const std::vector<Eigen::Vector3d>& points, const std::vector
         for (int dx = -1; dx <= 1; ++dx) {
           for (int dy = -1; dy <= 1; ++dy) {
             for (int dz = -1; dz <= 1; ++dz) {
-              const Eigen::Vector3d q = (cells[m].index.cast<double>() + Eigen::Vector3d(dx + 0.5, dy + 0.5, dz + 0.5)) * s;
-              const int64_t key = CellKey(q, s);
+              const int64_t key = PackCell(cells[m].index + Eigen::Vector3i(dx, dy, dz));
               auto found_cell = in_slot.find(key);
               if (found_cell == in_slot.end() || !component.insert(key).second) continue;
               stack.push_back(found_cell->second);

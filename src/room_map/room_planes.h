@@ -27,7 +27,7 @@ std::optional<WeightedPlane> FitWeightedPlane(const std::vector<Eigen::Vector3d>
 
 /// A plane of the room (room frame): from markers lying in it, or found in
 /// depth alone (a wall without markers, the floor beyond its markers' reach;
-/// FindDepthPlanes), where `cells` say where it was seen.
+/// AddDepthPlanes), where `cells` say where it was seen.
 struct MarkerPlane {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  ///< unit, the first marker's side
   double offset = 0;                                  ///< normal . x = offset on the plane
