@@ -837,7 +837,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   std::vector<Eigen::Vector3d> landmarks;
   std::vector<BaKeypointObservation> keypoint_observations;
   std::vector<std::pair<int, int>> keypoint_source;  // (frame slot, keypoint), parallel
-  std::vector<std::vector<int>> frame_candidates(frames.size());
+  std::vector<std::vector<std::pair<int, int>>> frame_candidates(frames.size());  // (keypoint, candidate)
   std::vector<bool> associated(frames.size(), false);
   const BaOptions& bo = options.bundle_adjustment;
   // Associates the keypoints of frame slot s (posed) with the candidates.
@@ -906,49 +906,129 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       cand.weight += w;
       cand.observations.push_back({s, static_cast<int>(i)});
       cand.last_frame = s;
-      frame_candidates[s].push_back(best);
+      frame_candidates[s].emplace_back(static_cast<int>(i), best);
     }
   };
   // PnP of an unposed frame on the candidates of posed frames near it.
   auto pose_by_keypoints = [&](int s) {
     FrameData& f = frames[s];
     if (!options.use_keypoints || f.keypoints.size() < 20) return false;
-    std::vector<int> pool;
+    // The pool: every view, in the posed frames around s, of a candidate
+    // those frames see, with the descriptor that frame gave it (the views
+    // nearest in time look most alike); a keypoint's match is its nearest
+    // view, kept when the nearest view of any other candidate is clearly
+    // farther (ratio test between candidates, not between views).
+    struct View {
+      int candidate;
+      const std::uint8_t* descriptor;
+    };
+    std::vector<View> pool;
     for (int n = std::max(0, s - 4); n <= std::min<int>(static_cast<int>(frames.size()) - 1, s + 4); ++n) {
-      if (associated[n]) pool.insert(pool.end(), frame_candidates[n].begin(), frame_candidates[n].end());
+      if (!associated[n]) continue;
+      for (const auto& [i, c] : frame_candidates[n]) pool.push_back({c, Descriptor(frames, n, i)});
     }
-    std::sort(pool.begin(), pool.end());
-    pool.erase(std::unique(pool.begin(), pool.end()), pool.end());
     if (pool.size() < 20) return false;
     std::vector<cv::Point3d> object;
     std::vector<cv::Point2d> image;
     for (size_t i = 0; i < f.keypoints.size(); ++i) {
       const std::uint8_t* d = f.keypoints.descriptors.ptr<std::uint8_t>(static_cast<int>(i));
-      NearestTwo nearest;
-      for (int c : pool) {
-        nearest.Offer(c, HammingDistance32(d, Descriptor(frames, candidates[c].descriptor_frame,
-                                                         candidates[c].descriptor_index)));
+      int best = -1, d1 = 257, d2 = 257;
+      for (const View& v : pool) {
+        const int dist = HammingDistance32(d, v.descriptor);
+        if (v.candidate == best) {
+          d1 = std::min(d1, dist);
+        } else if (dist < d1) {
+          d2 = d1;
+          d1 = dist;
+          best = v.candidate;
+        } else if (dist < d2) {
+          d2 = dist;
+        }
       }
-      if (nearest.best < 0 || nearest.d1 > options.max_hamming || nearest.d1 > 0.8 * nearest.d2) continue;
-      const Eigen::Vector3d X = candidates[nearest.best].Position();
+      if (best < 0 || d1 > options.max_hamming || d1 > 0.8 * d2) continue;
+      const Eigen::Vector3d X = candidates[best].Position();
       object.emplace_back(X.x(), X.y(), X.z());
       image.emplace_back(f.keypoint_px[i].x(), f.keypoint_px[i].y());
     }
-    if (object.size() < 15) return false;
+    const bool search = options.keypoint_search_by_projection;
+    if (object.size() < (search ? 8u : 15u)) return false;
     cv::Mat rvec, tvec;
     std::vector<int> inliers;
     const bool ok = cv::solvePnPRansac(object, image, K.CvK(), cv::noArray(), rvec, tvec, false, 300, 3.0, 0.999,
                                        inliers, cv::SOLVEPNP_AP3P);
-    if (!ok || inliers.size() < 20) return false;
-    PoseCorrespondences corr;
-    for (int i : inliers) {
-      corr.Add(Eigen::Vector3d(object[i].x, object[i].y, object[i].z), Eigen::Vector2d(image[i].x, image[i].y),
-               options.keypoint_sigma_px, CorrespondenceGroup::kKeypoint, i);
+    if (!ok || inliers.size() < (search ? 6u : 20u)) return false;
+    Rigid3d camera_from_room = Rigid3d::FromRotationVector(
+        Eigen::Vector3d(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2)),
+        Eigen::Vector3d(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2)));
+    PoseRefinementResult refined;
+    if (inliers.size() >= 20) {
+      PoseCorrespondences corr;
+      for (int i : inliers) {
+        corr.Add(Eigen::Vector3d(object[i].x, object[i].y, object[i].z), Eigen::Vector2d(image[i].x, image[i].y),
+                 options.keypoint_sigma_px, CorrespondenceGroup::kKeypoint, i);
+      }
+      refined = RefineCameraPose(corr, K, camera_from_room);
+    } else {
+      // Too few to trust: the pool searched again from that pose (a wide
+      // step between frames or a repeating floor leaves few matches that
+      // pass the ratio test over the whole pool): each keypoint takes the
+      // nearest view among the candidates that project within a few pixels
+      // of it at a depth its own reading agrees with, when the nearest
+      // other candidate there is clearly farther; twice, the second time
+      // from the pose the first search gave. A wrong pose finds few.
+      std::vector<int> index_of(candidates.size(), -1);
+      std::vector<int> unique_candidates;
+      for (const View& v : pool) {
+        if (index_of[v.candidate] < 0) {
+          index_of[v.candidate] = static_cast<int>(unique_candidates.size());
+          unique_candidates.push_back(v.candidate);
+        }
+      }
+      std::vector<Eigen::Vector2d> uv(unique_candidates.size());
+      std::vector<double> z(unique_candidates.size());
+      for (int round = 0; round < 2; ++round) {
+        for (size_t u = 0; u < unique_candidates.size(); ++u) {
+          const Eigen::Vector3d p = camera_from_room * candidates[unique_candidates[u]].Position();
+          z[u] = p.z();
+          if (p.z() > 0.1) uv[u] = K.Project(p);
+        }
+        const double radius = round == 0 ? 8.0 : 4.0;
+        std::vector<int> best(f.keypoints.size(), -1), d1(f.keypoints.size(), 257), d2(f.keypoints.size(), 257);
+        for (const View& v : pool) {
+          const int u = index_of[v.candidate];
+          if (z[u] <= 0.1) continue;
+          for (size_t i = 0; i < f.keypoints.size(); ++i) {
+            if ((f.keypoint_px[i] - uv[u]).squaredNorm() > radius * radius) continue;
+            const float zi = f.keypoints.depth_m[i];
+            if (zi > 0 && std::abs(zi - z[u]) > std::max(options.association_min_distance_m, 3 * bo.DepthSigmaM(zi)))
+              continue;
+            const int dist =
+                HammingDistance32(f.keypoints.descriptors.ptr<std::uint8_t>(static_cast<int>(i)), v.descriptor);
+            if (v.candidate == best[i]) {
+              d1[i] = std::min(d1[i], dist);
+            } else if (dist < d1[i]) {
+              d2[i] = d1[i];
+              d1[i] = dist;
+              best[i] = v.candidate;
+            } else if (dist < d2[i]) {
+              d2[i] = dist;
+            }
+          }
+        }
+        PoseCorrespondences corr;
+        for (size_t i = 0; i < f.keypoints.size(); ++i) {
+          if (best[i] < 0 || d1[i] > options.max_hamming || d1[i] > 0.8 * d2[i]) continue;
+          corr.Add(candidates[best[i]].Position(), f.keypoint_px[i], options.keypoint_sigma_px,
+                   CorrespondenceGroup::kKeypoint, static_cast<int>(i));
+        }
+        refined = RefineCameraPose(corr, K, camera_from_room);
+        camera_from_room = refined.camera_from_room;
+      }
     }
-    const Eigen::Vector3d rv(rvec.at<double>(0), rvec.at<double>(1), rvec.at<double>(2));
-    const Eigen::Vector3d tv(tvec.at<double>(0), tvec.at<double>(1), tvec.at<double>(2));
-    const PoseRefinementResult refined = RefineCameraPose(corr, K, Rigid3d::FromRotationVector(rv, tv));
-    if (refined.keypoint_inliers < 20 || refined.keypoint_rms_px > 2.0) return false;
+    // 20 inliers from the ratio test; 15 from the search by projection,
+    // whose matches also agree with the depth.
+    const int min_inliers = inliers.size() >= 20 ? 20 : 15;
+    if (refined.keypoint_inliers < min_inliers || refined.keypoint_rms_px > 2.0) return false;
     f.posed = true;
     f.posed_by_keypoints = true;
     f.camera_from_room = refined.camera_from_room;

@@ -109,6 +109,16 @@ struct RoomMapBuildOptions {
   int max_hamming = 50;
   double association_min_distance_m = 0.01;
   int min_landmark_observations = 3;
+  /// A frame without known markers is placed by PnP on the keypoints of the
+  /// placed frames around it, matched by descriptor with a ratio test; 20
+  /// inliers place it. With fewer (6-19: a wide step between frames, a
+  /// repeating tiled floor), the pose they give is used to search those
+  /// frames' keypoints again by projection (within 8 then 4 px, at a depth
+  /// the frame's own reading agrees with, a ratio test among the candidates
+  /// there), and 15 inliers of that search place it. Seed 13 of the random
+  /// conditions with an sRGB camera: the walk's last eight frames (the
+  /// origin alone on a bare floor) are placed only this way.
+  bool keypoint_search_by_projection = true;
   int max_landmarks = 4000;
   /// Landmarks are thinned over a voxel grid of this size for spread.
   double landmark_voxel_m = 0.1;
