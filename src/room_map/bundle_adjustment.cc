@@ -158,6 +158,33 @@ struct KeypointDepthCost {
   double z, inv_sigma;
 };
 
+// A weak prior holding a parameter block near its value, for the
+// covariance only: a direction nothing observes (a landmark on one ray, a
+// plane's offset with no depth) makes the Jacobian rank deficient, and
+// Ceres's sparse QR then computes no covariance at all. 10 units (m, or a
+// quaternion's components) is nothing next to what the observations say of
+// every direction they do determine.
+class WeakPriorCost : public ceres::CostFunction {
+ public:
+  WeakPriorCost(const double* x0, int n) : x0_(x0, x0 + n) {
+    set_num_residuals(n);
+    mutable_parameter_block_sizes()->push_back(n);
+  }
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    const int n = static_cast<int>(x0_.size());
+    for (int i = 0; i < n; ++i) residuals[i] = (x[0][i] - x0_[i]) * kWeight;
+    if (jacobians && jacobians[0]) {
+      for (int i = 0; i < n * n; ++i) jacobians[0][i] = 0;
+      for (int i = 0; i < n; ++i) jacobians[0][i * n + i] = kWeight;
+    }
+    return true;
+  }
+
+ private:
+  static constexpr double kWeight = 0.1;
+  std::vector<double> x0_;
+};
+
 // Depth readings at image pixels as samples at their ideal (undistorted)
 // pixels, at most `max_samples`.
 std::vector<DepthSample> IdealDepthSamples(std::vector<cv::Point2d> px, const std::vector<float>& z,
@@ -380,6 +407,81 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
       if (!plane_used[i]) continue;
       P.planes[i].normal = Eigen::Vector3d(planes[i][0], planes[i][1], planes[i][2]).normalized();
       P.planes[i].offset = planes[i][3];
+    }
+    if (!options.covariance_markers.empty()) {
+      const auto t_cov = std::chrono::steady_clock::now();
+      const int ref = options.covariance_reference;
+      ARPOS_CHECK(ref >= 0 && ref < static_cast<int>(markers.size()), "covariance reference out of range");
+      auto free_marker = [&](int m) { return m >= 0 && m < static_cast<int>(markers.size()) && marker_used[m] && !P.marker_fixed[m]; };
+      // Blocks: the reference and each marker, with their cross terms.
+      std::vector<const double*> ids;
+      if (free_marker(ref)) {
+        ids.push_back(markers[ref].q);
+        ids.push_back(markers[ref].t);
+      }
+      const size_t ref_blocks = ids.size();
+      std::vector<std::pair<const double*, const double*>> blocks;
+      for (size_t i = 0; i < ref_blocks; ++i) {
+        for (size_t j = i; j < ref_blocks; ++j) blocks.emplace_back(ids[i], ids[j]);
+      }
+      for (int m : options.covariance_markers) {
+        if (!free_marker(m) || m == ref) continue;
+        std::vector<const double*> these(ids.begin(), ids.begin() + ref_blocks);
+        these.push_back(markers[m].q);
+        these.push_back(markers[m].t);
+        for (size_t i = 0; i < these.size(); ++i) {
+          for (size_t j = i; j < these.size(); ++j) blocks.emplace_back(these[i], these[j]);
+        }
+      }
+      std::sort(blocks.begin(), blocks.end());
+      blocks.erase(std::unique(blocks.begin(), blocks.end()), blocks.end());
+      std::vector<double*> parameter_blocks;
+      cp.GetParameterBlocks(&parameter_blocks);
+      for (double* x : parameter_blocks) {
+        if (cp.IsParameterBlockConstant(x)) continue;
+        cp.AddResidualBlock(new WeakPriorCost(x, cp.ParameterBlockSize(x)), nullptr, x);
+      }
+      ceres::Covariance::Options co;
+      co.algorithm_type = ceres::SPARSE_QR;
+      co.num_threads = options.threads;
+      ceres::Covariance covariance(co);
+      const bool ok = !blocks.empty() && covariance.Compute(blocks, &cp);
+      const Rigid3d reference = P.room_from_marker[ref];
+      const Eigen::Matrix3d Rt = reference.rotation.toRotationMatrix().transpose();
+      for (int m : options.covariance_markers) {
+        Eigen::Matrix3d c = Eigen::Matrix3d::Constant(std::numeric_limits<double>::infinity());
+        if (m == ref) {
+          c.setZero();
+        } else if (ok && m >= 0 && m < static_cast<int>(markers.size()) && marker_used[m] &&
+                   (free_marker(m) || ref_blocks)) {
+          // A fixed marker (the map's root) varies only through the reference.
+          std::vector<const double*> these(ids.begin(), ids.begin() + ref_blocks);
+          if (free_marker(m)) {
+            these.push_back(markers[m].q);
+            these.push_back(markers[m].t);
+          }
+          const int n = 3 * static_cast<int>(these.size());
+          Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> joint(n, n);
+          if (covariance.GetCovarianceMatrixInTangentSpace(these, joint.data())) {
+            // Centre of m in the reference's frame: R_ref^T (t_m - t_ref).
+            // Quaternion increments are half angles on the left (Ceres's
+            // EigenQuaternionManifold): the rotation is twice the increment.
+            const Eigen::Vector3d d = P.room_from_marker[m].translation - reference.translation;
+            Eigen::Matrix3d dx;
+            dx << 0, -d.z(), d.y(), d.z(), 0, -d.x(), -d.y(), d.x(), 0;
+            Eigen::MatrixXd J = Eigen::MatrixXd::Zero(3, n);
+            if (ref_blocks) {
+              J.block<3, 3>(0, 0) = 2 * dx;
+              J.block<3, 3>(0, 3) = -Eigen::Matrix3d::Identity();
+            }
+            if (free_marker(m)) J.block<3, 3>(0, n - 3) = Eigen::Matrix3d::Identity();
+            c = Rt * (J * joint * J.transpose()) * Rt.transpose();
+          }
+        }
+        summary.relative_centre_covariance.push_back(c);
+      }
+      summary.covariance_seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t_cov).count();
     }
   }
   summary.seconds =

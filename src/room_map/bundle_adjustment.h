@@ -120,6 +120,11 @@ struct BaOptions {
   int max_iterations = 50;
   int threads = 2;
   double function_tolerance = 1e-7;
+  /// After the solve, the covariance of each of these markers' centre
+  /// relative to marker `covariance_reference` (indices into
+  /// room_from_marker): BaSummary::relative_centre_covariance. Empty: none.
+  std::vector<int> covariance_markers;
+  int covariance_reference = -1;
 
   std::string Validate() const;
   bool Check(std::string* reason = nullptr) const;
@@ -132,6 +137,12 @@ struct BaSummary {
   double initial_cost = 0, final_cost = 0;
   double seconds = 0;
   std::string message;
+  /// Per BaOptions::covariance_markers: the covariance (m^2) of that
+  /// marker's centre in the reference marker's frame, marginal over
+  /// everything else the adjustment estimates (cameras, landmarks, planes,
+  /// the other markers); infinite where it could not be computed.
+  std::vector<Eigen::Matrix3d> relative_centre_covariance;
+  double covariance_seconds = 0;
 };
 
 /// Optimises `problem` in place. Throws arpos::Error for inconsistent indices.

@@ -93,7 +93,7 @@ RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingI
   RoomMapRecord record = ToRecord(map, plan, room_recording);
   record.room_frame_tilt_sigma_deg = Measured(r.room_frame_tilt_sigma_deg);
   record.room_frame_yaw_sigma_deg = Measured(r.room_frame_yaw_sigma_deg);
-  record.room_frame_couch_sigma_mm = Measured(r.room_frame_couch_sigma_mm);
+  record.room_frame_couch_sigma_mm = Measured(r.CouchSigmaMm());
   std::string details = StringPrintf(
       "plan %lld, %zu markers (origin %d), %d landmarks, marker residual mean %.3f px max %.3f px, "
       "%d/%d frames, depth scale %.4f, from %s",
@@ -104,6 +104,9 @@ RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingI
                           "couch %.3f mm (1 sigma)",
                           r.origin_observations, r.room_frame_tilt_sigma_deg, r.room_frame_yaw_sigma_deg,
                           r.room_frame_couch_sigma_mm);
+  if (r.map_couch_markers > 0) {
+    details += StringPrintf("; the map near the couch relative to it %.3f mm (1 sigma)", r.map_couch_sigma_mm);
+  }
   if (!r.camera_response.empty()) details += "; " + OneLine(r.camera_response);
   if (!r.depth_correction.empty()) details += "; " + OneLine(r.depth_correction);
   if (!map.surface.empty()) {

@@ -486,6 +486,11 @@ std::string RoomMapBuildReport::ToText() const {
       "%.3f mm (1 sigma)",
       origin_observations, room_frame_tilt_sigma_deg, room_frame_yaw_sigma_deg,
       room_frame_couch_sigma_mm);
+  if (map_couch_markers > 0) {
+    out << StringPrintf("; the map near the couch relative to it %.3f mm (1 sigma, median of %d marker(s) near "
+                        "the couch, over everything the adjustment estimates; %.2f s)",
+                        map_couch_sigma_mm, map_couch_markers, map_couch_covariance_s);
+  }
   if (origin_plane_views > 0) {
     out << StringPrintf("; tilt from the origin's views and the depth of its plane in %d views", origin_plane_views);
   }
@@ -1466,7 +1471,30 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
                                       planes.size(), depth_planes, views_used, samples_used);
   };
   if (options.use_room_planes) set_room_planes(false);
-  report.joint_adjustment = RunBundleAdjustment(&ba, joint_options);
+  // The map near the couch as known relative to the origin marker, marginal
+  // over everything the adjustment estimates: the markers within 1.5 m of
+  // the couch point (or the nearest one), each centre's covariance in the
+  // origin's frame, after the last adjustment.
+  auto with_couch_covariance = [&](BaOptions o) {
+    const int origin_slot = marker_slot.at(origin_id);
+    const Eigen::Vector3d couch = ba.room_from_marker[origin_slot] * options.couch_point_in_room;
+    o.covariance_reference = origin_slot;
+    int nearest = -1;
+    double nearest_m = std::numeric_limits<double>::infinity();
+    for (size_t m = 0; m < ba.room_from_marker.size(); ++m) {
+      if (static_cast<int>(m) == origin_slot) continue;
+      const double d = (ba.room_from_marker[m].translation - couch).norm();
+      if (d < 1.5) o.covariance_markers.push_back(static_cast<int>(m));
+      if (d < nearest_m) {
+        nearest_m = d;
+        nearest = static_cast<int>(m);
+      }
+    }
+    if (o.covariance_markers.empty() && nearest >= 0) o.covariance_markers.push_back(nearest);
+    return o;
+  };
+  report.joint_adjustment = RunBundleAdjustment(&ba, with_couch_covariance(joint_options));
+  BaSummary couch_covariance = report.joint_adjustment;
   // Drop outlier observations and adjust again.
   {
     const BaResiduals res = ComputeBaResiduals(ba);
@@ -1522,7 +1550,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       progress(depth_planes ? "bundle adjustment (outliers removed, planes found in depth)"
                             : "bundle adjustment (outliers removed)",
                0.85);
-      const BaSummary second = RunBundleAdjustment(&ba, joint_options);
+      const BaSummary second = RunBundleAdjustment(&ba, with_couch_covariance(joint_options));
+      couch_covariance = second;
       report.joint_adjustment.iterations += second.iterations;
       report.joint_adjustment.seconds += second.seconds;
       report.joint_adjustment.final_cost = second.final_cost;
@@ -1759,6 +1788,32 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
           "sides",
           origin_id, used, report.room_frame_tilt_sigma_deg, report.room_frame_couch_sigma_mm,
           options.max_room_frame_tilt_sigma_deg, options.max_room_frame_couch_sigma_mm));
+    }
+  }
+  {
+    // The map near the couch relative to the origin marker: what the
+    // frames, markers and landmarks between them let move (the origin's own
+    // views included), the median over the markers near the couch.
+    std::vector<double> sigmas;
+    for (const Eigen::Matrix3d& c : couch_covariance.relative_centre_covariance) {
+      if (c.allFinite()) sigmas.push_back(std::sqrt(std::max(0.0, c.trace())) * 1000);
+    }
+    report.map_couch_markers = static_cast<int>(sigmas.size());
+    if (!sigmas.empty()) {
+      std::sort(sigmas.begin(), sigmas.end());
+      const size_t n = sigmas.size();
+      report.map_couch_sigma_mm = n % 2 ? sigmas[n / 2] : 0.5 * (sigmas[n / 2 - 1] + sigmas[n / 2]);
+    }
+    report.map_couch_covariance_s = couch_covariance.covariance_seconds;
+    // Said when it, not the origin's own views, is what is weak.
+    if (report.map_couch_sigma_mm > options.max_room_frame_couch_sigma_mm &&
+        !(report.map_couch_sigma_mm <= 1.5 * report.room_frame_couch_sigma_mm)) {
+      report.warnings.push_back(StringPrintf(
+          "the map near the couch is known to %.2f mm relative to the origin marker (1 sigma, through the "
+          "frames and markers that link them; tolerance %.2f mm); record the room again with more room "
+          "markers between the origin marker and the couch, each seen together with the next, or with the "
+          "origin marker nearer the couch",
+          report.map_couch_sigma_mm, options.max_room_frame_couch_sigma_mm));
     }
   }
 

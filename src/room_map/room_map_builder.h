@@ -279,6 +279,22 @@ struct RoomMapBuildReport {
   double support_plane_offset_deg = 0;
   /// How far the fused planes turned the room frame (deg; 0: not turned).
   double room_frame_turn_deg = 0;
+  /// The map near the couch relative to the origin marker (1 sigma, mm):
+  /// the median, over the markers within 1.5 m of the couch point (or the
+  /// nearest marker), of the uncertainty of the marker's centre in the
+  /// origin's frame, marginal over everything the last joint adjustment
+  /// estimates (cameras, landmarks, planes, other markers): the chain of
+  /// frames between a far origin and the couch, which the room frame's own
+  /// figure above leaves out. Infinite when not computed.
+  double map_couch_sigma_mm = std::numeric_limits<double>::infinity();
+  int map_couch_markers = 0;
+  double map_couch_covariance_s = 0;
+  /// The larger of the two: how well the couch's position in the room
+  /// frame is known (what the plan stores and tracking adds to its bounds).
+  double CouchSigmaMm() const {
+    return std::isfinite(map_couch_sigma_mm) ? std::max(room_frame_couch_sigma_mm, map_couch_sigma_mm)
+                                             : room_frame_couch_sigma_mm;
+  }
   /// 1-sigma position error (mm) the room frame's uncertainty gives at a point.
   double RoomFramePositionSigmaMm(const Eigen::Vector3d& point_in_room) const;
   RoomSurfaceReport surface;

@@ -147,7 +147,10 @@ struct RoomMapRecord {
   std::string depth_correction;
   /// The room frame's own uncertainty (1 sigma; room_map_builder.h
   /// RoomMapBuildReport): tilt of the origin marker about its in-plane axes,
-  /// yaw about its normal, and the position error at the plan's isocentre.
+  /// yaw about its normal, and the position error at the plan's isocentre:
+  /// the larger of the origin's own and the map's near the couch relative
+  /// to the origin (RoomMapBuildReport::CouchSigmaMm; maps planned before
+  /// 2026-12-04 hold the origin's own alone).
   /// Empty: not measured (maps from before schema version 4, or too few views).
   std::optional<double> room_frame_tilt_sigma_deg;
   std::optional<double> room_frame_yaw_sigma_deg;

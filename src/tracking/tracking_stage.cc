@@ -209,8 +209,8 @@ RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchToleran
   if (note.blocks_in) {
     note.text += StringPrintf(
         ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f mm / %.1f deg "
-        "tolerance, so no frame can read `in`; record the room again with a few close, sharp views of the "
-        "origin marker (the plan's warning)",
+        "tolerance, so no frame can read `in`; record the room again as the plan's warning says (close, sharp "
+        "views of the origin marker, or more room markers between it and the couch)",
         k * sigma_mm, k * sigma_deg, k, tolerances.translation_mm, tolerances.rotation_deg);
   }
   return note;
