@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <functional>
 #include <map>
 #include <set>
 #include <mutex>
@@ -467,6 +468,10 @@ std::string RoomMapBuildReport::ToText() const {
   }
   out << StringPrintf("landmarks: %d kept of %d candidates (%d in exclusion boxes), %d observations",
                       landmarks, landmark_candidates, landmarks_excluded, keypoint_observations);
+  if (landmarks_joining_groups > 0) {
+    out << StringPrintf("; %d of them seen in two frames only, kept to tie groups of frames nothing else ties",
+                        landmarks_joining_groups);
+  }
   if (localization_landmarks > 0) {
     out << StringPrintf("; %d of them placed after the adjustment, for localisation only", localization_landmarks);
   }
@@ -1212,6 +1217,52 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         }
       }
       kept = std::move(thinned);
+    }
+    // Groups of frames that neither the kept landmarks nor the mapped
+    // markers tie together (a wide step where the frames on either side
+    // share their keypoints in pairs only) would be held to each other in
+    // the adjustment by the room's planes alone, free to slide along them
+    // (random seed 13 with a linear camera: the origin's frames, 1.1 m of
+    // uncertainty at the couch). The candidates seen in fewer frames than
+    // min_landmark_observations, in two such groups, join them.
+    {
+      std::vector<int> group(frames.size());
+      std::iota(group.begin(), group.end(), 0);
+      std::function<int(int)> find = [&](int x) { return group[x] == x ? x : group[x] = find(group[x]); };
+      for (int c : kept) {
+        const auto& obs = candidates[c].observations;
+        for (size_t k = 1; k < obs.size(); ++k) group[find(obs[k].first)] = find(obs[0].first);
+      }
+      std::map<int, int> seen_in;  // mapped marker id -> a posed frame that sees it
+      for (size_t s = 0; s < frames.size(); ++s) {
+        if (!frames[s].posed) continue;
+        for (const auto& m : frames[s].markers) {
+          if (!marker_slot.count(m.id)) continue;
+          const auto [it, first] = seen_in.emplace(m.id, static_cast<int>(s));
+          if (!first) group[find(static_cast<int>(s))] = find(it->second);
+        }
+      }
+      std::vector<int> linking;
+      std::set<std::pair<int, int>> pairs;
+      for (size_t c = 0; c < candidates.size(); ++c) {
+        const auto& obs = candidates[c].observations;
+        if (obs.size() < 2 || static_cast<int>(obs.size()) >= options.min_landmark_observations) continue;
+        const int a = find(obs.front().first), b = find(obs.back().first);
+        if (a == b) continue;
+        bool excluded = false;
+        if (root_id == origin_id) {
+          for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(candidates[c].Position());
+        }
+        if (excluded) continue;
+        linking.push_back(static_cast<int>(c));
+        pairs.emplace(std::min(a, b), std::max(a, b));
+      }
+      if (!linking.empty()) {
+        ARPOS_DEBUG(linking.size() << " keypoint(s) seen in two frames join " << pairs.size()
+                                   << " pair(s) of frame groups that nothing else ties");
+        kept.insert(kept.end(), linking.begin(), linking.end());
+        report.landmarks_joining_groups = static_cast<int>(linking.size());
+      }
     }
     // Landmarks and their observations for the adjustment.
     rebuild_cameras();

@@ -288,6 +288,9 @@ struct RoomMapBuildReport {
   /// figure above leaves out. Infinite when not computed.
   double map_couch_sigma_mm = std::numeric_limits<double>::infinity();
   int map_couch_markers = 0;
+  /// Landmarks seen in two frames only, kept because they tie groups of
+  /// frames that nothing else in the adjustment ties (0: none needed).
+  int landmarks_joining_groups = 0;
   double map_couch_covariance_s = 0;
   /// The larger of the two: how well the couch's position in the room
   /// frame is known (what the plan stores and tracking adds to its bounds).
