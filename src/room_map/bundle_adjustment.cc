@@ -412,7 +412,9 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
       const auto t_cov = std::chrono::steady_clock::now();
       const int ref = options.covariance_reference;
       ARPOS_CHECK(ref >= 0 && ref < static_cast<int>(markers.size()), "covariance reference out of range");
-      auto free_marker = [&](int m) { return m >= 0 && m < static_cast<int>(markers.size()) && marker_used[m] && !P.marker_fixed[m]; };
+      auto free_marker = [&](int m) {
+        return m >= 0 && m < static_cast<int>(markers.size()) && marker_used[m] && !P.marker_fixed[m];
+      };
       // Blocks: the reference and each marker, with their cross terms.
       std::vector<const double*> ids;
       if (free_marker(ref)) {
@@ -450,7 +452,8 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
       const Eigen::Matrix3d Rt = reference.rotation.toRotationMatrix().transpose();
       for (int m : options.covariance_markers) {
         Eigen::Matrix3d c = Eigen::Matrix3d::Constant(std::numeric_limits<double>::infinity());
-        if (m == ref) {
+        const bool fixed = m >= 0 && m < static_cast<int>(markers.size()) && P.marker_fixed[m];
+        if (m == ref || (fixed && ref_blocks == 0)) {  // nothing between them varies
           c.setZero();
         } else if (ok && m >= 0 && m < static_cast<int>(markers.size()) && marker_used[m] &&
                    (free_marker(m) || ref_blocks)) {
