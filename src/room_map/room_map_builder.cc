@@ -1544,7 +1544,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     if (o.covariance_markers.empty() && nearest >= 0) o.covariance_markers.push_back(nearest);
     return o;
   };
-  report.joint_adjustment = RunBundleAdjustment(&ba, with_couch_covariance(joint_options));
+  // (Only after the last: with planes found in depth a second one follows.)
+  const bool second_follows = options.use_room_planes && options.room_planes_from_depth;
+  report.joint_adjustment =
+      RunBundleAdjustment(&ba, second_follows ? joint_options : with_couch_covariance(joint_options));
   BaSummary couch_covariance = report.joint_adjustment;
   // Drop outlier observations and adjust again.
   {
