@@ -223,6 +223,32 @@ struct FloorScene {
     }
     return P;
   }
+
+  // Adds 60 textured points on the floor between the markers, seen by every
+  // camera that has them in view (0.7 px noise, depth with the sensor's).
+  void AddFloorLandmarks(BaProblem* P, uint32_t seed) const {
+    std::mt19937 rng(seed);
+    std::normal_distribution<double> unit(0.0, 1.0);
+    std::uniform_real_distribution<double> x(-0.3, 3.3), y(-0.6, 1.0);
+    for (int l = 0; l < 60; ++l) {
+      const Eigen::Vector3d X(x(rng), y(rng), 0);
+      const int landmark = static_cast<int>(P->landmarks_in_room.size());
+      P->landmarks_in_room.push_back(X + Eigen::Vector3d(0.01, 0.01, 0.01));
+      for (size_t c = 0; c < camera_from_room.size(); ++c) {
+        const Eigen::Vector3d p = camera_from_room[c] * X;
+        const Eigen::Vector2d px = K.Project(p);
+        if (p.z() <= 0 || px.x() < 0 || px.y() < 0 || px.x() >= K.width || px.y() >= K.height) continue;
+        BaKeypointObservation o;
+        o.camera = static_cast<int>(c);
+        o.landmark = landmark;
+        o.pixel = px + 0.7 * Eigen::Vector2d(unit(rng), unit(rng));
+        o.sigma_px = 0.7;
+        const double sigma = 0.001 + 0.0015 * p.z() * p.z();
+        o.depth_m = static_cast<float>(p.z() + sigma * unit(rng));
+        P->keypoint_observations.push_back(o);
+      }
+    }
+  }
 };
 
 TEST(RoomPlanes, TheFloorsDepthHoldsAFarMarkersHeightInTheAdjustment) {
@@ -256,8 +282,10 @@ TEST(RoomPlanes, TheFloorsDepthHoldsAFarMarkersHeightInTheAdjustment) {
 // another (the plan's "map near the couch relative to the origin") is
 // honest and does not depend on which marker holds the map: over draws of
 // the corner noise the far marker's errors match it (mean normalised squared
-// error near 3, its three degrees of freedom), and the same quantity with
-// the far marker fixed instead of the origin is the same matrix.
+// error near 3, its three degrees of freedom), with or without keypoints on
+// the floor (landmarks, eliminated by their Schur complement), and the same
+// quantity with the far marker fixed instead of the origin is the same
+// matrix (which checks the cross terms and Ceres's half-angle increments).
 TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheverMarkerIsFixed) {
   const FloorScene scene;
   BaOptions options;
@@ -283,6 +311,27 @@ TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheve
   std::printf("far marker: mean NEES %.2f (3 expected), 1 sigma %.2f mm\n", nees, sigma_mm);
   EXPECT_GT(nees, 1.5);
   EXPECT_LT(nees, 6.0);
+
+  // With keypoints on the floor (landmarks, which the covariance takes out
+  // by their Schur complement): narrower, and as honest.
+  double nees_kp = 0, sigma_kp_mm = 0;
+  for (int d = 0; d < draws; ++d) {
+    BaProblem p = scene.Observe(300 + d, false);
+    scene.AddFloorLandmarks(&p, 500 + d);
+    const BaSummary s = RunBundleAdjustment(&p, options);
+    ASSERT_TRUE(s.usable);
+    const Eigen::Matrix3d& c = s.relative_centre_covariance[0];
+    ASSERT_TRUE(c.allFinite());
+    const Eigen::Vector3d e = p.room_from_marker[2].translation - scene.room_from_marker[2].translation;
+    nees_kp += e.dot(c.ldlt().solve(e));
+    sigma_kp_mm += 1000 * std::sqrt(c.trace());
+  }
+  nees_kp /= draws;
+  sigma_kp_mm /= draws;
+  std::printf("with floor keypoints: mean NEES %.2f, 1 sigma %.2f mm\n", nees_kp, sigma_kp_mm);
+  EXPECT_GT(nees_kp, 1.5);
+  EXPECT_LT(nees_kp, 6.0);
+  EXPECT_LT(sigma_kp_mm, 0.8 * sigma_mm);
 
   // The map held by the far marker instead: its centre in the origin's
   // frame (the origin free, the reference) has the same covariance.
