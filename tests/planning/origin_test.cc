@@ -98,6 +98,20 @@ const PoorOriginCase& GetPoorOriginCase() {
   return c;
 }
 
+// Each mapped marker within 1.5 m of the couch point: its id and how far its
+// centre is from the truth (mm), in the room frame.
+std::vector<std::pair<int, double>> NearCouchMarkerErrorsMm(const RoomMap& map, const sim::SimulationTruth& truth,
+                                                            const Eigen::Vector3d& couch) {
+  std::vector<std::pair<int, double>> out;
+  for (const RoomMapMarkerEntry& m : map.markers) {
+    for (const auto& t : truth.room_markers) {
+      if (t.id != m.id || (t.parent_from_marker.translation - couch).norm() > 1.5) continue;
+      out.emplace_back(m.id, (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000);
+    }
+  }
+  return out;
+}
+
 TEST(RoomMapOrigin, RarelySeenSmallObliqueOriginStillGivesARoomFrame) {
   const PoorOriginCase& c = GetPoorOriginCase();
   std::printf("origin seen (geometrically) in %d of 60 room frames\n", c.origin_views);
@@ -163,19 +177,13 @@ TEST(RoomMapOrigin, AnOriginBeyondWideStepsOverABareFloorIsReachedBySearchingByP
   // The room frame is weak here (eight views of a 27 px marker far from the
   // couch), and the plan says so; the markers near the couch are within
   // what it says (1 sigma at the couch) and 2 mm.
-  const Eigen::Vector3d couch = options.couch_point_in_room;
-  int near = 0;
-  for (const RoomMapMarkerEntry& m : built.map.markers) {
-    for (const auto& t : c.truth.room_markers) {
-      if (t.id != m.id || (t.parent_from_marker.translation - couch).norm() > 1.5) continue;
-      ++near;
-      const double e = (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000;
-      std::printf("marker %d near the couch: %.2f mm off (room frame 1 sigma at the couch %.2f mm)\n", m.id, e,
-                  built.report.room_frame_couch_sigma_mm);
-      EXPECT_LT(e, built.report.room_frame_couch_sigma_mm + 2) << "marker " << m.id;
-    }
+  const auto near = NearCouchMarkerErrorsMm(built.map, c.truth, options.couch_point_in_room);
+  for (const auto& [id, e] : near) {
+    std::printf("marker %d near the couch: %.2f mm off (room frame 1 sigma at the couch %.2f mm)\n", id, e,
+                built.report.room_frame_couch_sigma_mm);
+    EXPECT_LT(e, built.report.room_frame_couch_sigma_mm + 2) << "marker " << id;
   }
-  EXPECT_GE(near, 2);
+  EXPECT_GE(near.size(), 2u);
 }
 
 // Seed 13 with a linear camera: the frames that show the origin (the end of
@@ -197,16 +205,12 @@ TEST(RoomMapOrigin, FramesTiedOnlyByTwoViewKeypointsAreTiedInTheAdjustment) {
   ASSERT_GT(r.map_couch_markers, 0);
   EXPECT_LT(r.map_couch_sigma_mm, 30.0);
   EXPECT_GE(r.CouchSigmaMm(), r.room_frame_couch_sigma_mm);
-  const Eigen::Vector3d couch = options.couch_point_in_room;
-  for (const RoomMapMarkerEntry& m : built.map.markers) {
-    for (const auto& t : c.truth.room_markers) {
-      if (t.id != m.id || (t.parent_from_marker.translation - couch).norm() > 1.5) continue;
-      const double e = (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000;
-      std::printf("marker %d near the couch: %.2f mm off (the map there 1 sigma %.2f mm)\n", m.id, e,
-                  r.map_couch_sigma_mm);
-      EXPECT_LT(e, 3 * r.map_couch_sigma_mm) << "marker " << m.id;
-    }
+  const auto near = NearCouchMarkerErrorsMm(built.map, c.truth, options.couch_point_in_room);
+  for (const auto& [id, e] : near) {
+    std::printf("marker %d near the couch: %.2f mm off (the map there 1 sigma %.2f mm)\n", id, e, r.map_couch_sigma_mm);
+    EXPECT_LT(e, 3 * r.map_couch_sigma_mm) << "marker " << id;
   }
+  EXPECT_GE(near.size(), 2u);
 }
 
 // The same recording without the search by projection: the frames that
@@ -324,17 +328,9 @@ TEST(RoomMapOrigin, ALoneAmbiguousViewOfTheOriginIsSettledByTheDepthAroundIt) {
   EXPECT_GE(built.report.frames_used, 55);
   // The markers near the couch, in the room frame, within what the plan
   // says of its room frame (1 sigma at the couch) and 2 mm.
-  const Eigen::Vector3d couch = options.couch_point_in_room;
-  int near = 0;
-  for (const RoomMapMarkerEntry& m : built.map.markers) {
-    for (const auto& t : c.truth.room_markers) {
-      if (t.id != m.id || (t.parent_from_marker.translation - couch).norm() > 1.5) continue;
-      ++near;
-      const double e = (m.room_from_marker.translation - t.parent_from_marker.translation).norm() * 1000;
-      EXPECT_LT(e, built.report.room_frame_couch_sigma_mm + 2) << "marker " << m.id;
-    }
-  }
-  EXPECT_GE(near, 2);
+  const auto near = NearCouchMarkerErrorsMm(built.map, c.truth, options.couch_point_in_room);
+  for (const auto& [id, e] : near) EXPECT_LT(e, built.report.room_frame_couch_sigma_mm + 2) << "marker " << id;
+  EXPECT_GE(near.size(), 2u);
 }
 
 TEST(RoomMapOrigin, NoLandmarkInTheExclusionBoxWhenTheMapStartsFromAnotherMarker) {
