@@ -1328,8 +1328,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   if (options.estimate_depth_correction) {
     // Depth against the colour geometry: a joint adjustment without depth
     // terms (the markers' printed size fixes the scale), then every depth
-    // reading inside a marker against the depth the adjusted geometry gives
-    // it. Only markers: landmarks placed without depth are triangulated from
+    // reading inside a marker (and on the planes markers span, below)
+    // against the depth the adjusted geometry gives it. Not landmarks:
+    // landmarks placed without depth are triangulated from
     // a few far views and can be centimetres off; comparing depth with them
     // (as this check did at first) blamed the depth for the geometry's own
     // errors: on simulated random conditions residuals of 2-63 sigma, depth
@@ -1362,6 +1363,50 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         comparisons.push_back(
             {x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected), static_cast<int>(oi),
              (o.camera / 5) % 2});
+      }
+    }
+    // The depth on the planes the markers span, from the same depth-free
+    // geometry: the markers cover a small part of each image, the floor or
+    // a wall with markers much of it, where a smooth error field shows.
+    // Every grid point of a frame's depth within the plane's gate and near
+    // one of its markers; one group a frame and plane.
+    if (options.depth_check_plane_support_m > 0 && !plane_grid.px.empty()) {
+      std::vector<Eigen::Vector3d> normals, centres;
+      std::vector<std::array<Eigen::Vector3d, 4>> corners;
+      const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
+      for (const Rigid3d& m : vision.room_from_marker) {
+        normals.push_back(m.rotation * Eigen::Vector3d::UnitZ());
+        centres.push_back(m.translation);
+        std::array<Eigen::Vector3d, 4> c;
+        for (int k = 0; k < 4; ++k) c[k] = m * in_marker[k];
+        corners.push_back(c);
+      }
+      const std::vector<MarkerPlane> planes = FindMarkerPlanes(
+          normals, centres, corners, std::max(2, options.room_plane_min_markers), options.room_plane_min_spread_m);
+      const int first_group = static_cast<int>(vision.marker_observations.size());
+      for (size_t c = 0; c < vision.camera_from_room.size() && !planes.empty(); ++c) {
+        const FrameData& f = frames[camera_frame[c]];
+        const Rigid3d& camera_from_room = vision.camera_from_room[c];
+        const Rigid3d room_from_camera = camera_from_room.Inverse();
+        for (size_t i = 0; i < f.grid_z.size(); ++i) {
+          const double z = f.grid_z[i];
+          if (!(z > 0)) continue;
+          const Eigen::Vector2d& r = plane_grid.ray[i];
+          const Eigen::Vector3d ray(r.x(), r.y(), 1);
+          const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
+          const int p = PlaneNear(planes, room_from_camera * (z * ray), gate,
+                                  options.depth_check_plane_support_m);
+          if (p < 0) continue;
+          const Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
+          const double d = planes[p].offset + n.dot(camera_from_room.translation);
+          const double denom = n.dot(ray);
+          if (std::abs(denom) < 0.2 * ray.norm()) continue;  // grazing
+          const double expected = d / denom;
+          if (!(expected > 0.1)) continue;
+          comparisons.push_back({r.x(), r.y(), z, expected, joint_options.DepthSigmaM(expected),
+                                 first_group + static_cast<int>(c * planes.size()) + p,
+                                 static_cast<int>(c / 5) % 2, true});
+        }
       }
     }
     const DepthCorrectionFit fit = FitDepthCorrection(comparisons, K);

@@ -78,6 +78,14 @@ struct RoomMapBuildOptions {
   /// without depth terms) and remove a systematic error the data show
   /// (sensor/depth_correction.h) before depth enters the map.
   bool estimate_depth_correction = true;
+  /// The depth check reads the depth on the planes the markers span too
+  /// (floor, walls: at least room_plane_min_markers markers), within this
+  /// distance of one of the plane's markers; 0: inside the markers only.
+  /// (Depth error left at 1 m over 17 random xtion rooms with an error:
+  /// 0.79 mm RMS mean inside the markers only; 0.51, 0.52, 0.54, 0.62 and
+  /// 0.67 mm within 0.3, 0.4, 0.5, 0.75 and 1 m: the planes' own tilt tells
+  /// farther out.)
+  double depth_check_plane_support_m = 0.5;
   /// Depth readings that spread around the colour geometry by more than
   /// this many times the sensor model's noise are weighted as that spread.
   double depth_inflation_threshold = 1.5;

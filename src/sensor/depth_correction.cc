@@ -120,12 +120,42 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
   const double smooth_sigma = 0.002, node_sigma = 0.01;
   Eigen::VectorXd p = Eigen::VectorXd::Zero(np);
   std::vector<double> w(samples.size(), 1.0);
+  // Views with an offset of their own (DepthComparison::view_offset): each
+  // group's a + b x + c y is eliminated from the normal equations (Schur
+  // complement) and recovered for the robust weights. Priors: 5 mm offset,
+  // 10 mm per unit of normalised image coordinate.
+  struct ViewBlock {
+    Eigen::Matrix3d hgg = Eigen::Matrix3d::Zero();
+    Eigen::MatrixXd hgp;
+    Eigen::Vector3d bg = Eigen::Vector3d::Zero();
+    Eigen::Vector3d value = Eigen::Vector3d::Zero();
+  };
+  std::map<int, ViewBlock> views;
+  const double offset_sigma = 0.005, tilt_sigma = 0.01;
   for (int round = 0; round < 4; ++round) {
     Eigen::MatrixXd ata = Eigen::MatrixXd::Zero(np, np);
     Eigen::VectorXd atb = Eigen::VectorXd::Zero(np);
+    views.clear();
     for (size_t i = 0; i < samples.size(); ++i) {
       if (!use[i]) continue;
       const DepthComparison& s = samples[i];
+      if (s.view_offset) {
+        ViewBlock& v = views[s.group];
+        if (v.hgp.size() == 0) {
+          v.hgp = Eigen::MatrixXd::Zero(3, np);
+          v.hgg.diagonal() << 1 / (offset_sigma * offset_sigma), 1 / (tilt_sigma * tilt_sigma),
+              1 / (tilt_sigma * tilt_sigma);
+        }
+        const Eigen::Vector3d g(1, s.x, s.y);
+        const double wi = w[i] / (s.sigma_m * s.sigma_m);
+        v.hgg += wi * g * g.transpose();
+        v.bg += wi * g * (s.measured_m - s.expected_m);
+        int idx[4];
+        double gw[4];
+        const int n = GridWeights(c, s.x, s.y, idx, gw);
+        v.hgp.col(0) += wi * g * s.expected_m;
+        for (int k = 0; k < n; ++k) v.hgp.col(1 + idx[k]) += wi * g * s.expected_m * s.expected_m * gw[k];
+      }
       const double t = s.expected_m;
       int idx[4];
       double gw[4];
@@ -158,13 +188,20 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
         if (j + 1 < c.ny) smooth(j * c.nx + i, (j + 1) * c.nx + i);
       }
     }
+    for (auto& [group, v] : views) {
+      const Eigen::Matrix3d inv = v.hgg.inverse();
+      ata -= v.hgp.transpose() * inv * v.hgp;
+      atb -= v.hgp.transpose() * inv * v.bg;
+    }
     p = ata.ldlt().solve(atb);
     c.scale = p(0);
     for (int g = 0; g < ng; ++g) c.grid[g] = p(1 + g);
+    for (auto& [group, v] : views) v.value = v.hgg.inverse() * (v.bg - v.hgp * p);
     for (size_t i = 0; i < samples.size(); ++i) {  // Huber weights at 2 sigma
       if (!use[i]) continue;
       const DepthComparison& s = samples[i];
-      const double pred = c.scale * s.expected_m + s.expected_m * s.expected_m * c.Field(s.x, s.y);
+      double pred = c.scale * s.expected_m + s.expected_m * s.expected_m * c.Field(s.x, s.y);
+      if (s.view_offset) pred += views.at(s.group).value.dot(Eigen::Vector3d(1, s.x, s.y));
       const double r = std::abs(s.measured_m - s.expected_m - pred) / s.sigma_m;
       w[i] = r <= 2 ? 1.0 : 2.0 / r;
     }
@@ -206,28 +243,38 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
                                       const CameraIntrinsics& intrinsics) {
   DepthCorrectionFit out;
   out.samples = static_cast<int>(samples.size());
+  // The normalised RMS (the spread of depth around the colour geometry) is
+  // taken over the readings whose views have no offset of their own, when
+  // there are any: a view's offset over a wide surface is not the camera's.
+  const bool any_plain = std::any_of(samples.begin(), samples.end(),
+                                     [](const DepthComparison& s) { return !s.view_offset; });
+  auto counted = [&](const DepthComparison& s) { return !any_plain || !s.view_offset; };
   double z_min = 1e9, z_max = 0, sum_sq = 0;
+  int n_counted = 0;
   for (const DepthComparison& s : samples) {
     z_min = std::min(z_min, s.expected_m);
     z_max = std::max(z_max, s.expected_m);
+    if (!counted(s)) continue;
     const double r = (s.measured_m - s.expected_m) / s.sigma_m;
     sum_sq += r * r;
+    ++n_counted;
   }
   if (samples.size() < 200 || z_max < 1.3 * z_min) {
     out.message = StringPrintf("depth not checked against the colour geometry (%zu samples, depths %.2f-%.2f m)",
                                samples.size(), z_min, z_max);
     return out;
   }
-  out.normalised_rms_before = std::sqrt(sum_sq / samples.size());
+  out.normalised_rms_before = std::sqrt(sum_sq / n_counted);
 
   const std::vector<char> all(samples.size(), 1);
   DepthCorrection c = FitModel(samples, all, intrinsics);
   sum_sq = 0;
   for (const DepthComparison& s : samples) {
+    if (!counted(s)) continue;
     const double r = (c.TrueDepth(s.measured_m, s.x, s.y) - s.expected_m) / s.sigma_m;
     sum_sq += r * r;
   }
-  out.normalised_rms_after = std::sqrt(sum_sq / samples.size());
+  out.normalised_rms_after = std::sqrt(sum_sq / n_counted);
   // Cross-validated: the model fitted to one half of the views (by split)
   // against no correction on the other half, both ways; the gain in
   // squared normalised residual, a view counting as at most a few samples.

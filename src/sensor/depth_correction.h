@@ -12,7 +12,9 @@
 /// structured-light sensors show; a quadratic polynomial was tried and left
 /// such fields in place). Fitted (robust linear least squares) to depth samples inside
 /// markers whose depth the colour image fixes through the markers' printed
-/// size (room map adjustment without depth terms). Kept only when it
+/// size (room map adjustment without depth terms), and on the planes such
+/// markers span near them (each view's offset over the plane estimated with
+/// the correction: DepthComparison::view_offset). Kept only when it
 /// explains the data clearly better than no correction, or predicts
 /// readings it was not fitted to (cross-validation over two halves of the
 /// views: FitDepthCorrection).
@@ -63,6 +65,11 @@ struct DepthComparison {
   /// Which half of the data (0 or 1) the reading falls in when the
   /// correction is cross-validated: whole views, in blocks of frames.
   int split = 0;
+  /// The group's readings share an unknown offset and tilt over the image
+  /// (a + b x + c y, metres: the pose error of a view over a wide surface),
+  /// estimated with the correction under a zero-mean prior and not counted
+  /// as the camera's error.
+  bool view_offset = false;
 };
 
 struct DepthCorrectionFit {

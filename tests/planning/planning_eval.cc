@@ -47,6 +47,7 @@
 #include "sensor/depth_correction.h"
 #include "sensor/sequence.h"
 #include "store/sqlite_database.h"
+#include "simulation/sensor_model.h"
 #include "simulation/simulation_truth.h"
 #include "util/check.h"
 #include "util/string_util.h"
@@ -181,6 +182,31 @@ int main(int argc, char** argv) {
       }
       std::cout << StringPrintf("markers within 1.5 m of the couch point: %d, corner error mean %.3f mm\n", near_n / 4,
                                 near_n ? near_sum / near_n : 0.0);
+    }
+    {
+      // The plan's depth correction against the simulated depth error, both
+      // at 1 m over the image (every 8th pixel): what the correction leaves.
+      const CameraIntrinsics& K = folder.config.camera;
+      cv::Mat field;
+      if (truth.depth_field_mm_at_1m != 0) field = sim::MakeDepthErrorField(K.width, K.height, truth.depth_field_seed);
+      const DepthCorrection& c = build.map.depth_correction;
+      double s_true = 0, s_left = 0, max_left = 0;
+      int count = 0;
+      for (int y = 0; y < K.height; y += 8) {
+        for (int x = 0; x < K.width; x += 8) {
+          const double t = 1000 * truth.depth_scale_error +
+                           (field.empty() ? 0.0 : truth.depth_field_mm_at_1m * field.at<float>(y, x));
+          const double xn = (x - K.cx) / K.fx, yn = (y - K.cy) / K.fy;
+          const double e = c.IsIdentity() ? 0.0 : 1000 * (1.0 - c.TrueDepth(1.0, xn, yn));
+          s_true += t * t;
+          s_left += (t - e) * (t - e);
+          max_left = std::max(max_left, std::abs(t - e));
+          ++count;
+        }
+      }
+      std::cout << StringPrintf("depth error at 1 m over the image: %.3f mm RMS simulated, %.3f mm RMS left after the "
+                                "plan's correction (max %.3f)\n",
+                                std::sqrt(s_true / count), std::sqrt(s_left / count), max_left);
     }
     std::cout << StringPrintf("markers mapped: %zu of %zu; corner error mean %.3f mm, max %.3f mm\n",
                               build.map.markers.size(), truth.room_markers.size(), n ? sum / n : 0.0, worst);

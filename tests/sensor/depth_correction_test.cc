@@ -108,5 +108,63 @@ TEST(DepthCorrection, AScaleErrorIsRemoved) {
   EXPECT_NEAR(fit.correction.scale, -0.004, 0.001) << fit.message;
 }
 
+
+// What is left of a fit's field at 1 m over the image, relative to the true
+// field (RMS over RMS).
+double FieldLeft(const DepthCorrection& c, double field_mm) {
+  double left2 = 0, truth2 = 0;
+  for (double x = -0.55; x <= 0.55; x += 0.05) {
+    for (double y = -0.4; y <= 0.4; y += 0.05) {
+      const double truth_m = field_mm / 1000 * TrueField(x, y);
+      const double est_m = c.scale + c.Field(x, y);
+      left2 += (truth_m - est_m) * (truth_m - est_m);
+      truth2 += truth_m * truth_m;
+    }
+  }
+  return std::sqrt(left2 / truth2);
+}
+
+// Readings on a wide surface (a floor with markers: the lower two thirds of
+// each of 60 views, at 1-3 m), each view off by a pose error of its own
+// over the image (an offset of ~3 mm and a tilt of ~5 mm per unit of
+// normalised coordinate), on top of the sensor's noise and a 2 mm field.
+// With the views' own offsets modelled, the surface's readings recover the
+// field better than the marker views alone.
+TEST(DepthCorrection, AWideSurfaceWithItsViewsOffsetsRecoversTheFieldBetterThanMarkersAlone) {
+  const CameraIntrinsics k = Xtion();
+  for (unsigned seed = 1; seed <= 3; ++seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(0, 1);
+    std::normal_distribution<double> n(0, 1);
+    std::vector<DepthComparison> readings = Readings(2.0, 0, seed + 10, 60);
+    const double left_markers = FieldLeft(FitDepthCorrection(readings, k).correction, 2.0);
+    for (int v = 0; v < 60; ++v) {
+      const double a = 0.005 * n(rng), b = 0.01 * n(rng), c = 0.01 * n(rng);
+      for (int i = 0; i < 300; ++i) {
+        DepthComparison r;
+        r.x = (20 + 600 * u(rng) - k.cx) / k.fx;
+        r.y = (160 + 310 * u(rng) - k.cy) / k.fy;
+        r.expected_m = 3.0 - 2.0 * (r.y + 0.15) / 0.75;  // nearer at the bottom of the image
+        r.sigma_m = 0.001 + 0.0015 * r.expected_m * r.expected_m;
+        const double z = r.expected_m;
+        r.measured_m = z + 0.002 * z * z * TrueField(r.x, r.y) + a + b * r.x + c * r.y + r.sigma_m * n(rng);
+        r.group = 1000 + v;
+        r.split = (v / 5) % 2;
+        r.view_offset = true;
+        readings.push_back(r);
+      }
+    }
+    const DepthCorrectionFit with_offsets = FitDepthCorrection(readings, k);
+    for (DepthComparison& r : readings) r.view_offset = false;
+    const double left = FieldLeft(with_offsets.correction, 2.0);
+    const double left_independent = FieldLeft(FitDepthCorrection(readings, k).correction, 2.0);
+    std::printf("seed %u: field left %.2f (markers alone %.2f; the surface's views taken as independent %.2f)\n",
+                seed, left, left_markers, left_independent);
+    EXPECT_TRUE(with_offsets.applied) << with_offsets.message;
+    EXPECT_LT(left, 0.5) << "seed " << seed;
+    EXPECT_LT(left, left_markers) << "seed " << seed;
+  }
+}
+
 }  // namespace
 }  // namespace arpos
