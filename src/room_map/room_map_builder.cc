@@ -1325,6 +1325,20 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   ba.keypoint_observations = keypoint_observations;
   BaOptions joint_options = options.bundle_adjustment;
   joint_options.threads = options.threads;
+  // The planes (room_planes.h) that the markers at these poses span.
+  auto planes_of_markers = [&](const std::vector<Rigid3d>& room_from_marker, int min_markers) {
+    std::vector<Eigen::Vector3d> normals, centres;
+    std::vector<std::array<Eigen::Vector3d, 4>> corners;
+    const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
+    for (const Rigid3d& m : room_from_marker) {
+      normals.push_back(m.rotation * Eigen::Vector3d::UnitZ());
+      centres.push_back(m.translation);
+      std::array<Eigen::Vector3d, 4> c;
+      for (int k = 0; k < 4; ++k) c[k] = m * in_marker[k];
+      corners.push_back(c);
+    }
+    return FindMarkerPlanes(normals, centres, corners, min_markers, options.room_plane_min_spread_m);
+  };
   if (options.estimate_depth_correction) {
     // Depth against the colour geometry: a joint adjustment without depth
     // terms (the markers' printed size fixes the scale), then every depth
@@ -1371,18 +1385,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     // Every grid point of a frame's depth within the plane's gate and near
     // one of its markers; one group a frame and plane.
     if (options.depth_check_plane_support_m > 0 && !plane_grid.px.empty()) {
-      std::vector<Eigen::Vector3d> normals, centres;
-      std::vector<std::array<Eigen::Vector3d, 4>> corners;
-      const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
-      for (const Rigid3d& m : vision.room_from_marker) {
-        normals.push_back(m.rotation * Eigen::Vector3d::UnitZ());
-        centres.push_back(m.translation);
-        std::array<Eigen::Vector3d, 4> c;
-        for (int k = 0; k < 4; ++k) c[k] = m * in_marker[k];
-        corners.push_back(c);
-      }
-      const std::vector<MarkerPlane> planes = FindMarkerPlanes(
-          normals, centres, corners, std::max(2, options.room_plane_min_markers), options.room_plane_min_spread_m);
+      const std::vector<MarkerPlane> planes =
+          planes_of_markers(vision.room_from_marker, std::max(2, options.room_plane_min_markers));
       const int first_group = static_cast<int>(vision.marker_observations.size());
       for (size_t c = 0; c < vision.camera_from_room.size() && !planes.empty(); ++c) {
         const FrameData& f = frames[camera_frame[c]];
@@ -1447,28 +1451,18 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   // from a few keypoints where no marker is seen, can be off by centimetres
   // and would split a wall in two).
   auto set_room_planes = [&](bool from_depth) {
-    std::vector<Eigen::Vector3d> normals, centres;
-    std::vector<std::array<Eigen::Vector3d, 4>> corners;
-    const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
-    for (const Rigid3d& m : ba.room_from_marker) {
-      normals.push_back(m.rotation * Eigen::Vector3d::UnitZ());
-      centres.push_back(m.translation);
-      std::array<Eigen::Vector3d, 4> c;
-      for (int k = 0; k < 4; ++k) c[k] = m * in_marker[k];
-      corners.push_back(c);
-    }
-    std::vector<MarkerPlane> planes =
-        FindMarkerPlanes(normals, centres, corners, options.room_plane_min_markers, options.room_plane_min_spread_m);
+    std::vector<MarkerPlane> planes = planes_of_markers(ba.room_from_marker, options.room_plane_min_markers);
     const int origin_slot = marker_slot.at(origin_id);
+    const Rigid3d& origin_pose = ba.room_from_marker[origin_slot];
     if (options.room_plane_for_origin &&
         std::none_of(planes.begin(), planes.end(), [&](const MarkerPlane& p) {
           return std::find(p.markers.begin(), p.markers.end(), origin_slot) != p.markers.end();
         })) {
       MarkerPlane p;
-      p.normal = normals[origin_slot];
-      p.offset = p.normal.dot(centres[origin_slot]);
+      p.normal = origin_pose.rotation * Eigen::Vector3d::UnitZ();
+      p.offset = p.normal.dot(origin_pose.translation);
       p.markers = {origin_slot};
-      p.marker_centres = {centres[origin_slot]};
+      p.marker_centres = {origin_pose.translation};
       planes.push_back(std::move(p));
     }
     // Each depth of camera c's grid (corrected when the depth needed it):
