@@ -309,15 +309,22 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
   const bool explains = out.normalised_rms_after < 0.85 * out.normalised_rms_before;
   const bool predicts = out.cross_validated && out.cross_validated_gain > kMinCrossValidatedGain;
   out.applied = (explains || predicts) && std::abs(c.scale) < 0.05;
+  // The residual is over the readings it was counted on; the readings on
+  // wide surfaces (each view's offset fitted) are named apart.
+  const std::string over =
+      n_counted < out.samples
+          ? StringPrintf("%d readings inside the markers; %d on their planes as well", n_counted,
+                         out.samples - n_counted)
+          : StringPrintf("%d samples", out.samples);
   out.message = out.applied
-                    ? StringPrintf("%s; removed (depth residual %.2f -> %.2f sigma over %d samples; "
+                    ? StringPrintf("%s; removed (depth residual %.2f -> %.2f sigma over %s; "
                                    "cross-validated gain %.3f)",
                                    c.Describe().c_str(), out.normalised_rms_before,
-                                   out.normalised_rms_after, out.samples, out.cross_validated_gain)
-                    : StringPrintf("depth agrees with the colour geometry (residual %.2f sigma over %d "
-                                   "samples; a correction would give %.2f, cross-validated gain %.3f): "
+                                   out.normalised_rms_after, over.c_str(), out.cross_validated_gain)
+                    : StringPrintf("depth agrees with the colour geometry (residual %.2f sigma over %s; "
+                                   "a correction would give %.2f, cross-validated gain %.3f): "
                                    "not corrected",
-                                   out.normalised_rms_before, out.samples, out.normalised_rms_after,
+                                   out.normalised_rms_before, over.c_str(), out.normalised_rms_after,
                                    out.cross_validated_gain);
   return out;
 }
