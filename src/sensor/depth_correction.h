@@ -76,7 +76,9 @@ struct DepthCorrectionFit {
   bool applied = false;  ///< false: no correction is better supported than none
   DepthCorrection correction;
   int samples = 0;
-  /// RMS of (measured - expected) / sigma before and after the correction.
+  /// RMS of (measured - expected) / sigma before and after the correction,
+  /// over the readings without a view offset (those inside the markers)
+  /// when there are any, else over all.
   double normalised_rms_before = 0, normalised_rms_after = 0;
   /// The model fitted to one half of the views, tried on the other (both
   /// ways): the drop in squared normalised residual per effective sample
