@@ -100,6 +100,7 @@ int main(int argc, char** argv) {
     if (corner_sigma > 0) build_options.marker_corner_sigma_px = corner_sigma;
     if (const char* v = std::getenv("MIN_LM_OBS")) build_options.min_landmark_observations = std::atoi(v);
     if (std::getenv("NO_DEPTH_CHECK")) build_options.estimate_depth_correction = false;
+    if (const char* v = std::getenv("DEPTH_SUPPORT_M")) build_options.depth_check_plane_support_m = std::atof(v);
     if (std::getenv("SUPPORT")) build_options.use_support_plane = true;
     if (std::getenv("NO_BA_PLANES")) build_options.use_room_planes = false;
     if (std::getenv("NO_ORIGIN_PLANE")) build_options.room_plane_for_origin = false;
