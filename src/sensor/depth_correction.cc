@@ -102,6 +102,10 @@ DepthCorrection DepthCorrection::Parse(const std::string& text, const std::strin
 
 namespace {
 
+// The shape of a view's own offset over the image (DepthComparison::
+// view_offset): a + b x + c y.
+Eigen::Vector3d ViewOffsetBasis(const DepthComparison& s) { return {1, s.x, s.y}; }
+
 // The model fitted to the samples where `use` is set (robust, with the
 // priors below).
 DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std::vector<char>& use,
@@ -126,6 +130,7 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
   // 10 mm per unit of normalised image coordinate.
   struct ViewBlock {
     Eigen::Matrix3d hgg = Eigen::Matrix3d::Zero();
+    Eigen::Matrix3d hgg_inverse = Eigen::Matrix3d::Zero();
     Eigen::MatrixXd hgp;
     Eigen::Vector3d bg = Eigen::Vector3d::Zero();
     Eigen::Vector3d value = Eigen::Vector3d::Zero();
@@ -139,23 +144,6 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
     for (size_t i = 0; i < samples.size(); ++i) {
       if (!use[i]) continue;
       const DepthComparison& s = samples[i];
-      if (s.view_offset) {
-        ViewBlock& v = views[s.group];
-        if (v.hgp.size() == 0) {
-          v.hgp = Eigen::MatrixXd::Zero(3, np);
-          v.hgg.diagonal() << 1 / (offset_sigma * offset_sigma), 1 / (tilt_sigma * tilt_sigma),
-              1 / (tilt_sigma * tilt_sigma);
-        }
-        const Eigen::Vector3d g(1, s.x, s.y);
-        const double wi = w[i] / (s.sigma_m * s.sigma_m);
-        v.hgg += wi * g * g.transpose();
-        v.bg += wi * g * (s.measured_m - s.expected_m);
-        int idx[4];
-        double gw[4];
-        const int n = GridWeights(c, s.x, s.y, idx, gw);
-        v.hgp.col(0) += wi * g * s.expected_m;
-        for (int k = 0; k < n; ++k) v.hgp.col(1 + idx[k]) += wi * g * s.expected_m * s.expected_m * gw[k];
-      }
       const double t = s.expected_m;
       int idx[4];
       double gw[4];
@@ -168,6 +156,18 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
       for (int k = 0; k < n; ++k) {
         cols[k + 1] = 1 + idx[k];
         a[k + 1] = t * t * gw[k];
+      }
+      if (s.view_offset) {
+        ViewBlock& v = views[s.group];
+        if (v.hgp.size() == 0) {
+          v.hgp = Eigen::MatrixXd::Zero(3, np);
+          v.hgg.diagonal() << 1 / (offset_sigma * offset_sigma), 1 / (tilt_sigma * tilt_sigma),
+              1 / (tilt_sigma * tilt_sigma);
+        }
+        const Eigen::Vector3d g = ViewOffsetBasis(s);
+        v.hgg += wi * g * g.transpose();
+        v.bg += wi * g * r;
+        for (int u = 0; u <= n; ++u) v.hgp.col(cols[u]) += wi * g * a[u];
       }
       for (int u = 0; u <= n; ++u) {
         atb(cols[u]) += wi * a[u] * r;
@@ -189,19 +189,19 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
       }
     }
     for (auto& [group, v] : views) {
-      const Eigen::Matrix3d inv = v.hgg.inverse();
-      ata -= v.hgp.transpose() * inv * v.hgp;
-      atb -= v.hgp.transpose() * inv * v.bg;
+      v.hgg_inverse = v.hgg.inverse();
+      ata -= v.hgp.transpose() * v.hgg_inverse * v.hgp;
+      atb -= v.hgp.transpose() * v.hgg_inverse * v.bg;
     }
     p = ata.ldlt().solve(atb);
     c.scale = p(0);
     for (int g = 0; g < ng; ++g) c.grid[g] = p(1 + g);
-    for (auto& [group, v] : views) v.value = v.hgg.inverse() * (v.bg - v.hgp * p);
+    for (auto& [group, v] : views) v.value = v.hgg_inverse * (v.bg - v.hgp * p);
     for (size_t i = 0; i < samples.size(); ++i) {  // Huber weights at 2 sigma
       if (!use[i]) continue;
       const DepthComparison& s = samples[i];
       double pred = c.scale * s.expected_m + s.expected_m * s.expected_m * c.Field(s.x, s.y);
-      if (s.view_offset) pred += views.at(s.group).value.dot(Eigen::Vector3d(1, s.x, s.y));
+      if (s.view_offset) pred += views.at(s.group).value.dot(ViewOffsetBasis(s));
       const double r = std::abs(s.measured_m - s.expected_m - pred) / s.sigma_m;
       w[i] = r <= 2 ? 1.0 : 2.0 / r;
     }
