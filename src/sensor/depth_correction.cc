@@ -106,10 +106,16 @@ namespace {
 // view_offset): a + b x + c y.
 Eigen::Vector3d ViewOffsetBasis(const DepthComparison& s) { return {1, s.x, s.y}; }
 
+// Residuals beyond this many sigma (at the noise the fit is made at:
+// FitDepthCorrection) are left out of the fit after its first two rounds:
+// what stands on a floor seen far away passes the plane's gate, which is a
+// few centimetres there (benchmark/accuracy.md).
+constexpr double kRejectSigma = 4.0;
+
 // The model fitted to the samples where `use` is set (robust, with the
-// priors below).
+// priors below), each reading's sigma_m taken as noise_factor times its own.
 DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std::vector<char>& use,
-                         const CameraIntrinsics& intrinsics) {
+                         const CameraIntrinsics& intrinsics, double noise_factor) {
   DepthCorrection c;
   c.nx = 9;
   c.ny = 7;
@@ -148,7 +154,8 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
       int idx[4];
       double gw[4];
       const int n = GridWeights(c, s.x, s.y, idx, gw);
-      const double wi = w[i] / (s.sigma_m * s.sigma_m);
+      const double sigma = s.sigma_m * noise_factor;
+      const double wi = w[i] / (sigma * sigma);
       const double r = s.measured_m - s.expected_m;
       // Columns: 0 = scale (t), 1 + idx = grid (t^2 gw).
       int cols[5] = {0};
@@ -197,17 +204,26 @@ DepthCorrection FitModel(const std::vector<DepthComparison>& samples, const std:
     c.scale = p(0);
     for (int g = 0; g < ng; ++g) c.grid[g] = p(1 + g);
     for (auto& [group, v] : views) v.value = v.hgg_inverse * (v.bg - v.hgp * p);
-    for (size_t i = 0; i < samples.size(); ++i) {  // Huber weights at 2 sigma
+    // Huber weights at 2 sigma; from the third round none beyond kRejectSigma.
+    for (size_t i = 0; i < samples.size(); ++i) {
       if (!use[i]) continue;
       const DepthComparison& s = samples[i];
       double pred = c.scale * s.expected_m + s.expected_m * s.expected_m * c.Field(s.x, s.y);
       if (s.view_offset) pred += views.at(s.group).value.dot(ViewOffsetBasis(s));
-      const double r = std::abs(s.measured_m - s.expected_m - pred) / s.sigma_m;
-      w[i] = r <= 2 ? 1.0 : 2.0 / r;
+      const double r = std::abs(s.measured_m - s.expected_m - pred) / (s.sigma_m * noise_factor);
+      w[i] = r <= 2 ? 1.0 : (r <= kRejectSigma || round == 0) ? 2.0 / r : 0.0;
     }
   }
   return c;
 }
+
+// The fit is made at the noise the recording shows only when that is
+// clearly below the sensor model's: the readings' spread holds the
+// markers' own pose errors too (depth is weighted down only beyond 1.5x:
+// RoomMapBuildOptions::depth_inflation_threshold). Taken at 0.9-1.1x
+// (xtion seeds) it changed the correction by nothing that mattered and
+// moved the room frame of weak-origin seeds either way (benchmark/accuracy.md).
+constexpr double kQuieterThanModel = 1 / 1.5;
 
 // A group's (one marker view's) readings count as at most this many
 // independent ones when the support for a correction is weighed.
@@ -266,8 +282,24 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
   }
   out.normalised_rms_before = std::sqrt(sum_sq / n_counted);
 
+  // The readings' noise as this recording shows it: the sensor model's
+  // sigma scaled by the robust spread (1.4826 x median) of the readings
+  // inside the markers around a first fit at the model's noise; the fit is
+  // made again at that noise when it is clearly lower (a sensor quieter
+  // than the model, as the simulated l515 is 0.3-0.4x, otherwise lets what
+  // stands on a floor far away pass for depth error; benchmark/accuracy.md).
   const std::vector<char> all(samples.size(), 1);
-  DepthCorrection c = FitModel(samples, all, intrinsics);
+  DepthCorrection c = FitModel(samples, all, intrinsics, 1.0);
+  {
+    std::vector<double> r;
+    for (const DepthComparison& s : samples) {
+      if (counted(s)) r.push_back(std::abs(c.TrueDepth(s.measured_m, s.x, s.y) - s.expected_m) / s.sigma_m);
+    }
+    std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+    out.noise_factor = std::clamp(1.4826 * r[r.size() / 2], 0.2, 3.0);
+  }
+  const double fit_noise = out.noise_factor < kQuieterThanModel ? out.noise_factor : 1.0;
+  c = FitModel(samples, all, intrinsics, fit_noise);
   sum_sq = 0;
   for (const DepthComparison& s : samples) {
     if (!counted(s)) continue;
@@ -289,8 +321,8 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
   }
   const DepthCorrection none;
   if (std::count(half_a.begin(), half_a.end(), 1) >= 100 && std::count(half_b.begin(), half_b.end(), 1) >= 100) {
-    const DepthCorrection fit_a = FitModel(samples, half_a, intrinsics);
-    const DepthCorrection fit_b = FitModel(samples, half_b, intrinsics);
+    const DepthCorrection fit_a = FitModel(samples, half_a, intrinsics, fit_noise);
+    const DepthCorrection fit_b = FitModel(samples, half_b, intrinsics, fit_noise);
     out.cross_validated_gain = (SharedChiSquare(samples, half_b, group_size, none) -
                                 SharedChiSquare(samples, half_b, group_size, fit_a) +
                                 SharedChiSquare(samples, half_a, group_size, none) -
@@ -318,9 +350,10 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
           : StringPrintf("%d samples", out.samples);
   out.message = out.applied
                     ? StringPrintf("%s; removed (depth residual %.2f -> %.2f sigma over %s; "
-                                   "cross-validated gain %.3f)",
+                                   "cross-validated gain %.3f; the readings' noise %.2fx the sensor model's)",
                                    c.Describe().c_str(), out.normalised_rms_before,
-                                   out.normalised_rms_after, over.c_str(), out.cross_validated_gain)
+                                   out.normalised_rms_after, over.c_str(), out.cross_validated_gain,
+                                   out.noise_factor)
                     : StringPrintf("depth agrees with the colour geometry (residual %.2f sigma over %s; "
                                    "a correction would give %.2f, cross-validated gain %.3f): "
                                    "not corrected",

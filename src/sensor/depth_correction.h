@@ -17,7 +17,9 @@
 /// the correction: DepthComparison::view_offset). Kept only when it
 /// explains the data clearly better than no correction, or predicts
 /// readings it was not fitted to (cross-validation over two halves of the
-/// views: FitDepthCorrection).
+/// views: FitDepthCorrection). The readings' noise is taken from the
+/// recording when it is clearly below the sensor model's, and readings far
+/// outside it (what stands on a floor seen far away) are left out.
 
 #include <array>
 #include <string>
@@ -86,6 +88,12 @@ struct DepthCorrectionFit {
   /// the correction predicts readings it was not fitted to.
   bool cross_validated = false;
   double cross_validated_gain = 0;
+  /// The readings' noise relative to their sigma_m, as the readings inside
+  /// the markers spread around a first fit (robust; clamped to 0.2-3). The
+  /// fit is made at that noise when it is below 1/1.5 (a sensor clearly
+  /// quieter than the model), else at sigma_m; readings beyond 4 of it are
+  /// left out after the fit's first rounds.
+  double noise_factor = 1;
   std::string message;
 };
 

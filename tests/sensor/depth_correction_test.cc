@@ -29,8 +29,9 @@ double TrueField(double x, double y) { return std::sin(2.5 * x + 0.4) * std::cos
 
 // Readings z_measured = z (1 + scale) + field_mm / 1000 z^2 F(x, y) + noise,
 // the noise sigma(z) = 1 mm + 1.5 mm z^2 per reading plus half of that
-// shared by a view.
-std::vector<DepthComparison> Readings(double field_mm, double scale, unsigned seed, int views = 100) {
+// shared by a view (both times `noise`: a sensor quieter than the model).
+std::vector<DepthComparison> Readings(double field_mm, double scale, unsigned seed, int views = 100,
+                                      double noise = 1.0) {
   const CameraIntrinsics k = Xtion();
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
@@ -39,7 +40,7 @@ std::vector<DepthComparison> Readings(double field_mm, double scale, unsigned se
   for (int v = 0; v < views; ++v) {
     const double z0 = 0.8 + 2.2 * u(rng);
     const double cu = 40 + 560 * u(rng), cv = 40 + 400 * u(rng);
-    const double shared = 0.5 * (0.001 + 0.0015 * z0 * z0) * n(rng);
+    const double shared = noise * 0.5 * (0.001 + 0.0015 * z0 * z0) * n(rng);
     for (int s = 0; s < 16; ++s) {
       DepthComparison c;
       const double px = cu + 30 * (u(rng) - 0.5), py = cv + 30 * (u(rng) - 0.5);
@@ -48,7 +49,7 @@ std::vector<DepthComparison> Readings(double field_mm, double scale, unsigned se
       c.expected_m = z0 + 0.02 * (u(rng) - 0.5);
       c.sigma_m = 0.001 + 0.0015 * c.expected_m * c.expected_m;
       const double z = c.expected_m;
-      c.measured_m = z * (1 + scale) + field_mm / 1000 * z * z * TrueField(c.x, c.y) + shared + c.sigma_m * n(rng);
+      c.measured_m = z * (1 + scale) + field_mm / 1000 * z * z * TrueField(c.x, c.y) + shared + noise * c.sigma_m * n(rng);
       c.group = v;
       c.split = (v / 5) % 2;
       out.push_back(c);
@@ -163,6 +164,66 @@ TEST(DepthCorrection, AWideSurfaceWithItsViewsOffsetsRecoversTheFieldBetterThanM
     EXPECT_TRUE(with_offsets.applied) << with_offsets.message;
     EXPECT_LT(left, 0.5) << "seed " << seed;
     EXPECT_LT(left, left_markers) << "seed " << seed;
+  }
+}
+
+// What is left of a fit's field at 1 m along the top of the image (y <
+// -0.3), relative to the true field there.
+double FieldLeftAtTop(const DepthCorrection& c, double field_mm) {
+  double left2 = 0, truth2 = 0;
+  for (double x = -0.55; x <= 0.55; x += 0.05) {
+    for (double y = -0.45; y <= -0.3; y += 0.025) {
+      const double truth_m = field_mm / 1000 * TrueField(x, y);
+      const double est_m = c.scale + c.Field(x, y);
+      left2 += (truth_m - est_m) * (truth_m - est_m);
+      truth2 += truth_m * truth_m;
+    }
+  }
+  return std::sqrt(left2 / truth2);
+}
+
+// A sensor three times quieter than its model (as the l515 profile is at
+// 2-4 m) looking at a floor with markers from 1 m (bottom of the image) to
+// 4.5 m (top), where the plane's gate at the model's noise is ~9 cm across
+// the floor: in a third of the views a few readings along the top fall on
+// what stands on the floor, 80-150 mm short along the ray. The readings'
+// noise is estimated from the recording and those readings are left out;
+// at the model's noise they had bent the top of the field by several mm at
+// 1 m (the room frame 20 mm off at the couch on an l515 seed).
+TEST(DepthCorrection, AQuietSensorsFarFloorClutterDoesNotBendTheField) {
+  const CameraIntrinsics k = Xtion();
+  const double field_mm = 2.0, noise = 0.33;
+  for (unsigned seed = 1; seed <= 3; ++seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(0, 1);
+    std::normal_distribution<double> n(0, 1);
+    std::vector<DepthComparison> readings = Readings(field_mm, 0, seed + 20, 60, noise);
+    for (int v = 0; v < 60; ++v) {
+      const double a = 0.002 * n(rng), b = 0.004 * n(rng), c = 0.004 * n(rng);
+      for (int i = 0; i < 300; ++i) {
+        DepthComparison r;
+        r.x = (20 + 600 * u(rng) - k.cx) / k.fx;
+        r.y = (5 + 470 * u(rng) - k.cy) / k.fy;
+        r.expected_m = 1.0 / (0.22 + 0.78 * (r.y + 0.46) / 0.92);  // a floor: 1/z linear in y, 4.5 m to 1 m
+        r.sigma_m = 0.001 + 0.0015 * r.expected_m * r.expected_m;
+        const double z = r.expected_m;
+        r.measured_m = z + field_mm / 1000 * z * z * TrueField(r.x, r.y) + a + b * r.x + c * r.y +
+                       noise * r.sigma_m * n(rng);
+        if (v % 3 == 0 && r.y < -0.3 && i % 4 == 0) r.measured_m -= 0.08 + 0.07 * u(rng);  // on an object
+        r.group = 1000 + v;
+        r.split = (v / 5) % 2;
+        r.view_offset = true;
+        readings.push_back(r);
+      }
+    }
+    const DepthCorrectionFit fit = FitDepthCorrection(readings, k);
+    const double top = FieldLeftAtTop(fit.correction, field_mm), all = FieldLeft(fit.correction, field_mm);
+    std::printf("seed %u: noise %.2fx the model's; field left %.2f, along the top %.2f; %s\n", seed,
+                fit.noise_factor, all, top, fit.message.c_str());
+    EXPECT_TRUE(fit.applied) << fit.message;
+    EXPECT_NEAR(fit.noise_factor, noise, 0.15) << "seed " << seed;
+    EXPECT_LT(top, 0.5) << "seed " << seed;
+    EXPECT_LT(all, 0.4) << "seed " << seed;
   }
 }
 
