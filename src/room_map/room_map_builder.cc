@@ -30,6 +30,11 @@ namespace arpos {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// The depth check leaves out a reading inside a marker that is more than
+// this fraction of its depth off what the marker's pose without depth gives.
+constexpr double kDepthCheckGrossFraction = 0.1;
+
 double SecondsSince(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
@@ -1362,6 +1367,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
     };
     std::vector<DepthComparison> comparisons;
+    int grossly_off = 0;
     for (size_t oi = 0; oi < vision.marker_observations.size(); ++oi) {
       const BaMarkerObservation& o = vision.marker_observations[oi];
       const Rigid3d camera_from_marker = vision.camera_from_room[o.camera] * vision.room_from_marker[o.marker];
@@ -1374,6 +1380,14 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
         const double expected = d / denom;
         if (!(expected > 0.1)) continue;
+        // A marker posed wrongly without depth (a small oblique marker's
+        // flipped pose: on an l515 seed one view's expected depth was 10 m
+        // beyond the reading) says nothing about the sensor; no systematic
+        // error this check removes comes near 10 %.
+        if (std::abs(sample.depth_m - expected) > kDepthCheckGrossFraction * expected) {
+          ++grossly_off;
+          continue;
+        }
         comparisons.push_back(
             {x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected), static_cast<int>(oi),
              (o.camera / 5) % 2});
@@ -1415,6 +1429,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     const DepthCorrectionFit fit = FitDepthCorrection(comparisons, K);
     report.depth_correction = fit.message;
+    if (grossly_off > 0) {
+      report.depth_correction += StringPrintf(
+          "; %d reading(s) inside markers left out, more than %.0f %% off the depth their markers' poses without "
+          "depth give (a marker posed wrongly from its colour alone)",
+          grossly_off, 100 * kDepthCheckGrossFraction);
+    }
     // Depth weighted by what it is worth: the noise model scaled to the
     // spread the readings show around the colour geometry (after any
     // correction) when that is clearly beyond the model (below 1.5x nothing
