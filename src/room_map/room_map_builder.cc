@@ -32,7 +32,8 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 // The depth check leaves out a reading inside a marker that is more than
-// this fraction of its depth off what the marker's pose without depth gives.
+// this fraction of its depth off what the marker's pose without depth gives
+// (when such readings are under a quarter of them).
 constexpr double kDepthCheckGrossFraction = 0.1;
 
 double SecondsSince(Clock::time_point t) {
@@ -1366,8 +1367,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     auto normalised = [&](double u, double v) {  // ideal pixel -> normalised image coordinates
       return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
     };
-    std::vector<DepthComparison> comparisons;
-    int grossly_off = 0;
+    std::vector<DepthComparison> comparisons, grossly_off;
     for (size_t oi = 0; oi < vision.marker_observations.size(); ++oi) {
       const BaMarkerObservation& o = vision.marker_observations[oi];
       const Rigid3d camera_from_marker = vision.camera_from_room[o.camera] * vision.room_from_marker[o.marker];
@@ -1380,19 +1380,20 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
         const double expected = d / denom;
         if (!(expected > 0.1)) continue;
+        const DepthComparison comparison{x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected),
+                                         static_cast<int>(oi), (o.camera / 5) % 2};
         // A marker posed wrongly without depth (a small oblique marker's
         // flipped pose: on an l515 seed one view's expected depth was 10 m
         // beyond the reading) says nothing about the sensor; no systematic
         // error this check removes comes near 10 %.
-        if (std::abs(sample.depth_m - expected) > kDepthCheckGrossFraction * expected) {
-          ++grossly_off;
-          continue;
-        }
-        comparisons.push_back(
-            {x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected), static_cast<int>(oi),
-             (o.camera / 5) % 2});
+        const bool gross = std::abs(sample.depth_m - expected) > kDepthCheckGrossFraction * expected;
+        (gross ? grossly_off : comparisons).push_back(comparison);
       }
     }
+    // Left out only when they are a few: when most readings are that far
+    // off, the depth is (a wrong depth scale), and the check must see it.
+    const bool leave_out_gross = 4 * grossly_off.size() < comparisons.size() + grossly_off.size();
+    if (!leave_out_gross) comparisons.insert(comparisons.end(), grossly_off.begin(), grossly_off.end());
     // The depth on the planes the markers span, from the same depth-free
     // geometry: the markers cover a small part of each image, the floor or
     // a wall with markers much of it, where a smooth error field shows.
@@ -1429,11 +1430,11 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     const DepthCorrectionFit fit = FitDepthCorrection(comparisons, K);
     report.depth_correction = fit.message;
-    if (grossly_off > 0) {
+    if (leave_out_gross && !grossly_off.empty()) {
       report.depth_correction += StringPrintf(
-          "; %d reading(s) inside markers left out, more than %.0f %% off the depth their markers' poses without "
+          "; %zu reading(s) inside markers left out, more than %.0f %% off the depth their markers' poses without "
           "depth give (a marker posed wrongly from its colour alone)",
-          grossly_off, 100 * kDepthCheckGrossFraction);
+          grossly_off.size(), 100 * kDepthCheckGrossFraction);
     }
     // Depth weighted by what it is worth: the noise model scaled to the
     // spread the readings show around the colour geometry (after any

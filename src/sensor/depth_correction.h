@@ -91,8 +91,8 @@ struct DepthCorrectionFit {
   /// The readings' noise relative to their sigma_m, as the readings inside
   /// the markers spread around a first fit (robust; clamped to 0.2-3). The
   /// fit is made at that noise when it is below 1/1.5 (a sensor clearly
-  /// quieter than the model), else at sigma_m; readings beyond 4 of it are
-  /// left out after the fit's first rounds.
+  /// quieter than the model), else at sigma_m; readings beyond 4 sigma (at
+  /// the noise the fit is made at) are left out after its first two rounds.
   double noise_factor = 1;
   std::string message;
 };
