@@ -299,7 +299,7 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
     out.noise_factor = std::clamp(1.4826 * r[r.size() / 2], 0.2, 3.0);
   }
   const double fit_noise = out.noise_factor < kQuieterThanModel ? out.noise_factor : 1.0;
-  c = FitModel(samples, all, intrinsics, fit_noise);
+  if (fit_noise != 1.0) c = FitModel(samples, all, intrinsics, fit_noise);
   sum_sq = 0;
   for (const DepthComparison& s : samples) {
     if (!counted(s)) continue;
