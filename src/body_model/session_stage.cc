@@ -647,6 +647,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     c.room_localized = f.localized;
     c.registered_to_surface = f.surface_pose.has_value();
     c.fused_room_from_camera = f.view.room_from_camera;
+    c.localized_room_from_camera = f.room_from_camera;
     result.scan_cameras.push_back(c);
   }
   const Eigen::Vector3d box_centre = recon_options.crop_box->frame_from_box.translation;

@@ -134,6 +134,9 @@ struct ScanCameraPose {
   bool registered_to_surface = false;
   /// The pose its depth was fused with (the one camera_pose.txt lists).
   Rigid3d fused_room_from_camera;
+  /// The room map's own pose of the frame (when room_localized), before the
+  /// scan's one room offset; for evaluation.
+  Rigid3d localized_room_from_camera;
 };
 
 struct SessionStageResult {

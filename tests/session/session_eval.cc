@@ -7,7 +7,9 @@
 //   - reconstruction surface error: distance of every reconstruction point
 //     to the true body surface (the reference model at the true pose,
 //     sampled every 0.5 mm; the model carries 0.3 mm of simulated noise);
-//   - model pose at scan time against body_groundtruth.txt;
+//   - model pose at scan time against body_groundtruth.txt, split into the
+//     scan's placement in the room and the model's alignment within the
+//     scan, and the error of the room map's own poses of the scan frames;
 //   - the stage's step times.
 //
 //   session_eval CASE_DIR
@@ -19,6 +21,7 @@
 #include "controllers/session_controller.h"
 #include "geometry/mesh_io.h"
 #include "geometry/pose_error.h"
+#include "geometry/so3.h"
 #include "registration/kdtree.h"
 #include "registration/mesh_cloud.h"
 #include "sensor/tum_io.h"
@@ -128,6 +131,59 @@ int main(int argc, char** argv) {
                     "along the axis mean %+.2f); rotation mean %.3f deg\n",
                     kNames[kind], err_mm.size(), Mean(err_mm), Percentile(err_mm, 0.5), Percentile(err_mm, 1.0),
                     Mean(lateral_mm), Mean(axial_mm), Mean(deg));
+      }
+    }
+
+    // The model pose's error split in two: the scan's placement in the room
+    // (the mean error, as a rigid offset at the estimated isocentre, of the
+    // cameras registered to the reconstruction: what moves the whole scan)
+    // and the model's alignment within the scan (the model pose with that
+    // offset taken off). And the room map's own poses of the room-localised
+    // frames, the placement's input: their mean error at the isocentre (what
+    // averaging cannot remove) and their spread.
+    {
+      const auto cam_gt = ReadTrajectory(case_dir / "body_scan" / "groundtruth.txt");
+      const Eigen::Vector3d iso = r.room_from_model.translation;
+      auto offset_at_iso = [&](const Rigid3d& true_from_estimated) {
+        Eigen::Matrix<double, 6, 1> v;
+        v << true_from_estimated.RotationVector(), true_from_estimated * iso - iso;
+        return v;
+      };
+      auto mean_of = [](const std::vector<Eigen::Matrix<double, 6, 1>>& v) {
+        Eigen::Matrix<double, 6, 1> m = Eigen::Matrix<double, 6, 1>::Zero();
+        for (const auto& x : v) m += x;
+        return v.empty() ? m : Eigen::Matrix<double, 6, 1>(m / static_cast<double>(v.size()));
+      };
+      std::vector<Eigen::Matrix<double, 6, 1>> registered, localized;
+      std::vector<double> localized_mm;
+      for (const ScanCameraPose& c : r.scan_cameras) {
+        for (const auto& g : cam_gt) {
+          if (std::abs(g.timestamp_s - c.timestamp_s) > 1e-3) continue;
+          if (c.registered_to_surface) {
+            registered.push_back(offset_at_iso(g.room_from_x * c.room_from_camera.Inverse()));
+          }
+          if (c.room_localized) {
+            localized.push_back(offset_at_iso(g.room_from_x * c.localized_room_from_camera.Inverse()));
+            localized_mm.push_back(1000 * localized.back().tail<3>().norm());
+          }
+        }
+      }
+      if (!registered.empty()) {
+        const Eigen::Matrix<double, 6, 1> m = mean_of(registered);
+        const Rigid3d placement = Rigid3d::FromRotationVector(m.head<3>(), Eigen::Vector3d::Zero());
+        const Rigid3d true_from_estimated(placement.rotation, iso + m.tail<3>() - placement * iso);
+        const PoseError aligned = ComputePoseError(room_from_model, true_from_estimated * r.room_from_model);
+        std::printf("scan placement at the isocentre (mean of %zu registered cameras): %.2f mm (%+.2f %+.2f %+.2f), "
+                    "%.3f deg; model within the scan: %.2f mm, %.3f deg\n",
+                    registered.size(), 1000 * m.tail<3>().norm(), 1000 * m(3), 1000 * m(4), 1000 * m(5),
+                    DegFromRad(m.head<3>().norm()), aligned.translation_mm, aligned.rotation_deg);
+      }
+      if (!localized.empty()) {
+        const Eigen::Matrix<double, 6, 1> m = mean_of(localized);
+        std::printf("room-localised frames at the isocentre: %zu, mean error %.2f mm (%+.2f %+.2f %+.2f); "
+                    "per frame mean %.2f mm, median %.2f, max %.2f\n",
+                    localized.size(), 1000 * m.tail<3>().norm(), 1000 * m(3), 1000 * m(4), 1000 * m(5),
+                    Mean(localized_mm), Percentile(localized_mm, 0.5), Percentile(localized_mm, 1.0));
       }
     }
 
