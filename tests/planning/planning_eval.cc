@@ -19,7 +19,7 @@
 // TRUTH_START=1 (every frame relocalised from its true pose), TILT_GATE_ONLY=1 (the
 // origin's tilt fused with its coplanar markers only when the tilt itself is weak),
 // NO_SURFACE=1 (the localiser without the room's surface), SURF_MAXEFF, SURF_GATE, SURF_FLAT, SURF_VOXEL,
-// SURF_RADIUS (surface option overrides), SURF_KEEP_RADIUS=M (only the stored surface within M of the couch point), SURF_XYZ=FILE (the surface's points
+// SURF_RADIUS (surface option overrides), SURF_CORRECTED=1 (the surface used after a depth correction too), SURF_KEEP_RADIUS=M (only the stored surface within M of the couch point), SURF_XYZ=FILE (the surface's points
 // and normals written one a line), NO_HELD=1 (no frame held by depth and the motion filter alone), HELD_SIGMA=M,
 // HELD_FRAMES=N (its limits; FRAME_LOC prints such a frame as "held").
 // Besides MTE/MRE it prints the isocentre transfer error: the isocentre as
@@ -317,6 +317,7 @@ int main(int argc, char** argv) {
     if (const char* v = std::getenv("HELD_FRAMES")) options.max_depth_held_frames = std::atoi(v);
     if (const char* v = std::getenv("SURF_MAXEFF")) options.room_surface_max_effective = std::atof(v);
     if (const char* v = std::getenv("SURF_GATE")) options.room_surface_gate_m = std::atof(v);
+    if (std::getenv("SURF_CORRECTED")) options.room_surface_with_corrected_depth = true;
     if (const char* v = std::getenv("BAND_PX")) options.detector.edge.band_half_width_px = std::atof(v);
     if (const char* v = std::getenv("ACCEL")) options.motion_accel_m_s2 = std::atof(v);
     if (const char* v = std::getenv("ANG_ACCEL")) options.motion_angular_accel_rad_s2 = std::atof(v);
