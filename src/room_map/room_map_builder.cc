@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "geometry/so3.h"
+#include "room_map/depth_check.h"
 #include "room_map/marker_graph.h"
 #include "room_map/pose_refiner.h"
 #include "room_map/room_planes.h"
@@ -30,11 +31,6 @@ namespace arpos {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-// The depth check leaves out a reading inside a marker that is more than
-// this fraction of its depth off what the marker's pose without depth gives
-// (when such readings are under a quarter of them).
-constexpr double kDepthCheckGrossFraction = 0.1;
 
 double SecondsSince(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
@@ -1331,111 +1327,25 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   ba.keypoint_observations = keypoint_observations;
   BaOptions joint_options = options.bundle_adjustment;
   joint_options.threads = options.threads;
-  // The planes (room_planes.h) that the markers at these poses span.
-  auto planes_of_markers = [&](const std::vector<Rigid3d>& room_from_marker, int min_markers) {
-    std::vector<Eigen::Vector3d> normals, centres;
-    std::vector<std::array<Eigen::Vector3d, 4>> corners;
-    const std::array<Eigen::Vector3d, 4> in_marker = MarkerCornersInMarker(marker_size);
-    for (const Rigid3d& m : room_from_marker) {
-      normals.push_back(m.rotation * Eigen::Vector3d::UnitZ());
-      centres.push_back(m.translation);
-      std::array<Eigen::Vector3d, 4> c;
-      for (int k = 0; k < 4; ++k) c[k] = m * in_marker[k];
-      corners.push_back(c);
-    }
-    return FindMarkerPlanes(normals, centres, corners, min_markers, options.room_plane_min_spread_m);
-  };
   if (options.estimate_depth_correction) {
-    // Depth against the colour geometry: a joint adjustment without depth
-    // terms (the markers' printed size fixes the scale), then every depth
-    // reading inside a marker (and on the planes markers span, below)
-    // against the depth the adjusted geometry gives it. Not landmarks:
-    // landmarks placed without depth are triangulated from
-    // a few far views and can be centimetres off; comparing depth with them
-    // (as this check did at first) blamed the depth for the geometry's own
-    // errors: on simulated random conditions residuals of 2-63 sigma, depth
-    // inflated accordingly and maps up to 120 mm off; with markers alone the
-    // residual is ~1 sigma and the depth scale error is found (-0.18 %
-    // where the truth is -0.17 %).
-    // (On a copy: the joint adjustment below starts where it would without
-    // the check; starting it from the depth-free solution measured worse.)
-    BaOptions vision_options = joint_options;
-    vision_options.use_marker_depth = false;
-    vision_options.use_keypoint_depth = false;
-    BaProblem vision = ba;
-    RunBundleAdjustment(&vision, vision_options);
-    auto normalised = [&](double u, double v) {  // ideal pixel -> normalised image coordinates
-      return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
-    };
-    std::vector<DepthComparison> comparisons, grossly_off;
-    for (size_t oi = 0; oi < vision.marker_observations.size(); ++oi) {
-      const BaMarkerObservation& o = vision.marker_observations[oi];
-      const Rigid3d camera_from_marker = vision.camera_from_room[o.camera] * vision.room_from_marker[o.marker];
-      const Eigen::Vector3d n = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
-      const double d = n.dot(camera_from_marker.translation);
-      for (const DepthSample& sample : o.depth_samples) {
-        const Eigen::Vector2d xy = normalised(sample.pixel.x(), sample.pixel.y());
-        const double x = xy.x(), y = xy.y();
-        const double denom = n.dot(Eigen::Vector3d(x, y, 1));
-        if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
-        const double expected = d / denom;
-        if (!(expected > 0.1)) continue;
-        const DepthComparison comparison{x, y, sample.depth_m, expected, joint_options.DepthSigmaM(expected),
-                                         static_cast<int>(oi), (o.camera / 5) % 2};
-        // A marker posed wrongly without depth (a small oblique marker's
-        // flipped pose: on an l515 seed one view's expected depth was 10 m
-        // beyond the reading) says nothing about the sensor; no systematic
-        // error this check removes comes near 10 %.
-        const bool gross = std::abs(sample.depth_m - expected) > kDepthCheckGrossFraction * expected;
-        (gross ? grossly_off : comparisons).push_back(comparison);
-      }
-    }
-    // Left out only when they are a few: when most readings are that far
-    // off, the depth is (a wrong depth scale), and the check must see it.
-    const bool leave_out_gross = 4 * grossly_off.size() < comparisons.size() + grossly_off.size();
-    if (!leave_out_gross) comparisons.insert(comparisons.end(), grossly_off.begin(), grossly_off.end());
-    // The depth on the planes the markers span, from the same depth-free
-    // geometry: the markers cover a small part of each image, the floor or
-    // a wall with markers much of it, where a smooth error field shows.
-    // Every grid point of a frame's depth within the plane's gate and near
-    // one of its markers; one group a frame and plane.
-    if (options.depth_check_plane_support_m > 0 && !plane_grid.px.empty()) {
-      const std::vector<MarkerPlane> planes =
-          planes_of_markers(vision.room_from_marker, std::max(2, options.room_plane_min_markers));
-      const int first_group = static_cast<int>(vision.marker_observations.size());
-      for (size_t c = 0; c < vision.camera_from_room.size() && !planes.empty(); ++c) {
-        const FrameData& f = frames[camera_frame[c]];
-        const Rigid3d& camera_from_room = vision.camera_from_room[c];
-        const Rigid3d room_from_camera = camera_from_room.Inverse();
-        for (size_t i = 0; i < f.grid_z.size(); ++i) {
-          const double z = f.grid_z[i];
-          if (!(z > 0)) continue;
-          const Eigen::Vector2d& r = plane_grid.ray[i];
-          const Eigen::Vector3d ray(r.x(), r.y(), 1);
-          const double gate = std::max(options.room_plane_gate_m, 3 * joint_options.DepthSigmaM(z));
-          const int p = PlaneNear(planes, room_from_camera * (z * ray), gate,
-                                  options.depth_check_plane_support_m);
-          if (p < 0) continue;
-          const Eigen::Vector3d n = camera_from_room.rotation * planes[p].normal;
-          const double d = planes[p].offset + n.dot(camera_from_room.translation);
-          const double denom = n.dot(ray);
-          if (std::abs(denom) < 0.2 * ray.norm()) continue;  // grazing
-          const double expected = d / denom;
-          if (!(expected > 0.1)) continue;
-          comparisons.push_back({r.x(), r.y(), z, expected, joint_options.DepthSigmaM(expected),
-                                 first_group + static_cast<int>(c * planes.size()) + p,
-                                 static_cast<int>(c / 5) % 2, true});
-        }
-      }
-    }
-    const DepthCorrectionFit fit = FitDepthCorrection(comparisons, K);
-    report.depth_correction = fit.message;
-    if (leave_out_gross && !grossly_off.empty()) {
-      report.depth_correction += StringPrintf(
-          "; %zu reading(s) inside markers left out, more than %.0f %% off the depth their markers' poses without "
-          "depth give (a marker posed wrongly from its colour alone)",
-          grossly_off.size(), 100 * kDepthCheckGrossFraction);
-    }
+    // Depth against the colour geometry (depth_check.h): on simulated random
+    // conditions, comparing with landmarks instead gave residuals of 2-63
+    // sigma, depth inflated accordingly and maps up to 120 mm off; with
+    // markers alone the residual is ~1 sigma and the depth scale error is
+    // found (-0.18 % where the truth is -0.17 %).
+    DepthCheckInput check_input;
+    check_input.intrinsics = &K;
+    check_input.marker_size_m = marker_size;
+    check_input.grid = &plane_grid;
+    for (size_t c = 0; c < ba.camera_from_room.size(); ++c)
+      check_input.grid_z.push_back(&frames[camera_frame[c]].grid_z);
+    check_input.plane_support_m = options.depth_check_plane_support_m;
+    check_input.plane_gate_m = options.room_plane_gate_m;
+    check_input.plane_min_markers = options.room_plane_min_markers;
+    check_input.plane_min_spread_m = options.room_plane_min_spread_m;
+    const DepthCheckResult check = CheckDepthAgainstColourGeometry(ba, joint_options, check_input);
+    const DepthCorrectionFit& fit = check.fit;
+    report.depth_correction = check.message;
     // Depth weighted by what it is worth: the noise model scaled to the
     // spread the readings show around the colour geometry (after any
     // correction) when that is clearly beyond the model (below 1.5x nothing
@@ -1451,19 +1361,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     if (fit.applied) {
       result.map.depth_correction = fit.correction;
-      const DepthCorrection& c = fit.correction;
-      auto correct = [&](double z, double u, double v) {
-        const Eigen::Vector2d xy = normalised(u, v);
-        return c.TrueDepth(z, xy.x(), xy.y());
-      };
-      for (BaKeypointObservation& o : ba.keypoint_observations) {
-        if (o.depth_m > 0) o.depth_m = correct(o.depth_m, o.pixel.x(), o.pixel.y());
-      }
-      for (BaMarkerObservation& o : ba.marker_observations) {
-        for (DepthSample& sample : o.depth_samples) {
-          sample.depth_m = static_cast<float>(correct(sample.depth_m, sample.pixel.x(), sample.pixel.y()));
-        }
-      }
+      ApplyDepthCorrection(fit.correction, K, &ba);
     }
   }
   // The room's planes (room_planes.h) at the map's current state, and each
@@ -1472,7 +1370,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   // from a few keypoints where no marker is seen, can be off by centimetres
   // and would split a wall in two).
   auto set_room_planes = [&](bool from_depth) {
-    std::vector<MarkerPlane> planes = planes_of_markers(ba.room_from_marker, options.room_plane_min_markers);
+    std::vector<MarkerPlane> planes =
+        PlanesOfMarkers(ba.room_from_marker, marker_size, options.room_plane_min_markers,
+                        options.room_plane_min_spread_m);
     const int origin_slot = marker_slot.at(origin_id);
     const Rigid3d& origin_pose = ba.room_from_marker[origin_slot];
     if (options.room_plane_for_origin &&
