@@ -178,6 +178,37 @@ int main(int argc, char** argv) {
                     registered.size(), 1000 * m.tail<3>().norm(), 1000 * m(3), 1000 * m(4), 1000 * m(5),
                     DegFromRad(m.head<3>().norm()), aligned.translation_mm, aligned.rotation_deg);
       }
+      // The offsets the session averages (room-localised frames registered
+      // to the surface, at the isocentre): their spread over sqrt(frames)
+      // and over sqrt(runs of consecutive frames), against the placement's
+      // error above (consecutive frames share their error).
+      {
+        std::vector<std::pair<double, Eigen::Vector3d>> o;
+        for (const ScanCameraPose& c : r.scan_cameras) {
+          if (!c.room_localized || !c.registered_to_surface) continue;
+          const Rigid3d off = c.localized_room_from_camera * c.room_from_camera.Inverse();
+          o.push_back({c.timestamp_s, off * iso - iso});
+        }
+        std::sort(o.begin(), o.end(),
+                  [](const auto& a, const auto& b) { return a.first < b.first; });
+        std::vector<double> gaps;
+        for (size_t i = 1; i < o.size(); ++i) gaps.push_back(o[i].first - o[i - 1].first);
+        const double step = gaps.empty() ? 0 : *std::min_element(gaps.begin(), gaps.end());
+        int runs = o.empty() ? 0 : 1;
+        for (double g : gaps) runs += g > 1.5 * step ? 1 : 0;
+        Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+        for (const auto& p : o) mean += p.second;
+        if (!o.empty()) mean /= static_cast<double>(o.size());
+        double ss = 0;
+        for (const auto& p : o) ss += (p.second - mean).squaredNorm();
+        const double s = o.size() > 1 ? std::sqrt(ss / (o.size() - 1)) : 0;
+        std::printf(
+            "offsets averaged: %zu frames in %d runs, spread %.2f mm; over sqrt(frames) %.2f, over "
+            "sqrt(runs) %.2f\n",
+            o.size(), runs, 1000 * s,
+            o.empty() ? 0.0 : 1000 * s / std::sqrt(static_cast<double>(o.size())),
+            runs ? 1000 * s / std::sqrt(static_cast<double>(runs)) : 0.0);
+      }
       if (!localized.empty()) {
         const Eigen::Matrix<double, 6, 1> m = mean_of(localized);
         std::printf("room-localised frames at the isocentre: %zu, mean error %.2f mm (%+.2f %+.2f %+.2f); "
