@@ -395,15 +395,12 @@ TEST(DepthCheck, RemovesADepthScaleErrorAndLeavesOutOnlyAFewGrossReadings) {
         const double x = (s.pixel.x() - K.cx) / K.fx, y = (s.pixel.y() - K.cy) / K.fy;
         const Eigen::Vector3d ray(x, y, 1);
         // The true depth of the pixel: its ray on the marker's plane.
-        for (int m = 0; m < 3; ++m) {
-          if (m != o.marker) continue;
-          const Rigid3d camera_from_marker = cameras[o.camera] * scene.room_from_marker[m];
-          const Eigen::Vector3d normal = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
-          const double z_true = normal.dot(camera_from_marker.translation) / normal.dot(ray);
-          const double e = 1000 * (c.TrueDepth(z_true * 1.006, x, y) - z_true);
-          sum += e * e;
-          ++n;
-        }
+        const Rigid3d camera_from_marker = cameras[o.camera] * scene.room_from_marker[o.marker];
+        const Eigen::Vector3d normal = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
+        const double z_true = normal.dot(camera_from_marker.translation) / normal.dot(ray);
+        const double e = 1000 * (c.TrueDepth(z_true * 1.006, x, y) - z_true);
+        sum += e * e;
+        ++n;
       }
     }
     return std::sqrt(sum / std::max(1, n));
