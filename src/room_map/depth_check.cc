@@ -7,6 +7,14 @@
 #include "util/string_util.h"
 
 namespace arpos {
+namespace {
+
+// Ideal pixel -> normalised image coordinates.
+Eigen::Vector2d Normalised(const CameraIntrinsics& K, double u, double v) {
+  return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
+}
+
+}  // namespace
 
 std::vector<MarkerPlane> PlanesOfMarkers(const std::vector<Rigid3d>& room_from_marker,
                                          double marker_size_m, int min_markers,
@@ -37,9 +45,6 @@ DepthCheckResult CheckDepthAgainstColourGeometry(const BaProblem& problem, const
   vision_options.use_keypoint_depth = false;
   BaProblem vision = problem;
   RunBundleAdjustment(&vision, vision_options);
-  auto normalised = [&](double u, double v) {  // ideal pixel -> normalised image coordinates
-    return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
-  };
   // Every reading inside a marker against the depth its depth-free pose
   // gives; one group a marker view.
   std::vector<DepthComparison> comparisons, grossly_off;
@@ -50,7 +55,7 @@ DepthCheckResult CheckDepthAgainstColourGeometry(const BaProblem& problem, const
     const Eigen::Vector3d n = camera_from_marker.rotation * Eigen::Vector3d::UnitZ();
     const double d = n.dot(camera_from_marker.translation);
     for (const DepthSample& sample : o.depth_samples) {
-      const Eigen::Vector2d xy = normalised(sample.pixel.x(), sample.pixel.y());
+      const Eigen::Vector2d xy = Normalised(K, sample.pixel.x(), sample.pixel.y());
       const double x = xy.x(), y = xy.y();
       const double denom = n.dot(Eigen::Vector3d(x, y, 1));
       if (std::abs(denom) < 0.2 || !(sample.depth_m > 0)) continue;  // grazing
@@ -115,8 +120,7 @@ DepthCheckResult CheckDepthAgainstColourGeometry(const BaProblem& problem, const
     result.readings_left_out = static_cast<int>(grossly_off.size());
     result.message += StringPrintf(
         "; %zu reading(s) inside markers left out, more than %.0f %% off the depth their markers' "
-        "poses without "
-        "depth give (a marker posed wrongly from its colour alone)",
+        "poses without depth give (a marker posed wrongly from its colour alone)",
         grossly_off.size(), 100 * kDepthCheckGrossFraction);
   }
   return result;
@@ -125,7 +129,8 @@ DepthCheckResult CheckDepthAgainstColourGeometry(const BaProblem& problem, const
 void ApplyDepthCorrection(const DepthCorrection& correction, const CameraIntrinsics& K,
                           BaProblem* problem) {
   auto correct = [&](double z, double u, double v) {
-    return correction.TrueDepth(z, (u - K.cx) / K.fx, (v - K.cy) / K.fy);
+    const Eigen::Vector2d xy = Normalised(K, u, v);
+    return correction.TrueDepth(z, xy.x(), xy.y());
   };
   for (BaKeypointObservation& o : problem->keypoint_observations) {
     if (o.depth_m > 0) o.depth_m = correct(o.depth_m, o.pixel.x(), o.pixel.y());
