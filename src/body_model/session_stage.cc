@@ -4,8 +4,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include <Eigen/Eigenvalues>
-
+#include "body_model/rigid_offsets.h"
 #include "features/response_from_recording.h"
 #include "geometry/mesh_io.h"
 #include "geometry/so3.h"
@@ -77,66 +76,13 @@ RegistrationResult RefineOnModel(const PointCloud& scene, const PointCloud& mode
   return result;
 }
 
-// Small rigid offsets, each as (rotation vector, shift of `centre`): their
-// mean, leaving out those whose shift exceeds 3 x the median shift +
-// `margin_m` (an offset pulled wrongly). Small angles: plain means. The mean
-// as a rotation about `centre` followed by the shift; nullopt with fewer than
-// `min_count` offsets kept.
-using Offset = Eigen::Matrix<double, 6, 1>;
-std::optional<Rigid3d> RobustMeanOffset(const std::vector<Offset>& offsets, const Eigen::Vector3d& centre,
-                                        double margin_m, size_t min_count) {
-  if (offsets.size() < std::max<size_t>(min_count, 1)) return std::nullopt;
-  std::vector<double> sizes;
-  for (const auto& v : offsets) sizes.push_back(v.tail<3>().norm());
-  std::vector<double> sorted = sizes;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double limit = 3 * sorted[sorted.size() / 2] + margin_m;
-  Offset mean = Offset::Zero();
-  size_t used = 0;
-  for (size_t k = 0; k < offsets.size(); ++k) {
-    if (sizes[k] > limit) continue;
-    mean += offsets[k];
-    ++used;
-  }
-  if (used == 0 || used < min_count) return std::nullopt;
-  mean /= static_cast<double>(used);
-  const Rigid3d turn = Rigid3d::FromRotationVector(mean.head<3>(), Eigen::Vector3d::Zero());
-  return Rigid3d(turn.rotation, centre + mean.tail<3>() - turn * centre);
-}
-
-// How well the mean of `offsets` places `centre` (mm, 1 sigma, largest
-// axis): the spread of the shifts the mean kept (the same outlier rule as
-// RobustMeanOffset) over the square root of their number; infinity with
-// fewer than 3 kept (two frames cannot show their spread).
-double MeanOffsetSigmaMm(const std::vector<Offset>& offsets, double margin_m, int* used_out) {
-  *used_out = 0;
-  if (offsets.empty()) return std::numeric_limits<double>::infinity();
-  std::vector<double> sizes;
-  for (const auto& v : offsets) sizes.push_back(v.tail<3>().norm());
-  std::vector<double> sorted = sizes;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double limit = 3 * sorted[sorted.size() / 2] + margin_m;
-  std::vector<Eigen::Vector3d> kept;
-  for (size_t k = 0; k < offsets.size(); ++k) {
-    if (sizes[k] <= limit) kept.push_back(offsets[k].tail<3>());
-  }
-  *used_out = static_cast<int>(kept.size());
-  if (kept.size() < 3) return std::numeric_limits<double>::infinity();
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& v : kept) mean += v;
-  mean /= static_cast<double>(kept.size());
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const auto& v : kept) cov += (v - mean) * (v - mean).transpose();
-  cov /= static_cast<double>((kept.size() - 1) * kept.size());
-  return 1000 * std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues().maxCoeff()));
-}
-
 }  // namespace
 
 std::string SessionStageResult::RoomPlacementText() const {
   return std::isfinite(room_placement_sigma_mm)
-             ? StringPrintf("the scan placed in the room from %d frames, %.2f mm at the stickers (1 sigma)",
-                            room_placement_frames, room_placement_sigma_mm)
+             ? StringPrintf("the scan placed in the room from %d frames in %d run(s), %.2f mm at the stickers "
+                            "(1 sigma)",
+                            room_placement_frames, room_placement_runs, room_placement_sigma_mm)
              : StringPrintf("the scan placed in the room from %d frame(s), uncertainty unknown",
                             room_placement_frames);
 }
@@ -218,11 +164,10 @@ std::string SessionStageResult::Summary() const {
 
 namespace {
 
-// A small rigid offset as (rotation vector, shift it gives `centre`).
-Offset OffsetAt(const Rigid3d& offset, const Eigen::Vector3d& centre) {
-  Offset v;
-  v << offset.RotationVector(), offset * centre - centre;
-  return v;
+void SetRoomPlacement(const OffsetMeanSigma& placement, SessionStageResult* result) {
+  result->room_placement_frames = placement.frames;
+  result->room_placement_runs = placement.runs;
+  result->room_placement_sigma_mm = placement.sigma_mm;
 }
 
 // The mean position of the mapped stickers (zero without any).
@@ -477,8 +422,11 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     // as a rotation vector and the shift of the stickers' centre.
     const Eigen::Vector3d centre = StickerCentre(map);
     std::vector<Offset> offsets;
+    std::vector<double> times;
     for (const ScanFrame& f : frames) {
-      if (f.localized && f.posed) offsets.push_back(OffsetAt(f.room_from_camera * f.view.room_from_camera.Inverse(), centre));
+      if (!f.localized || !f.posed) continue;
+      offsets.push_back(OffsetAt(f.room_from_camera * f.view.room_from_camera.Inverse(), centre));
+      times.push_back(f.timestamp_s);
     }
     // Equal weights: the localiser's sigmas leave out map errors (two frames
     // 0.05 deg apart by their sigmas differed by 0.4 deg), and weighting by
@@ -487,7 +435,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     // and sticker-posed.
     const Rigid3d room_from_sticker_frame =
         RobustMeanOffset(offsets, centre, 0.002, 1).value_or(Rigid3d::Identity());
-    result.room_placement_sigma_mm = MeanOffsetSigmaMm(offsets, 0.002, &result.room_placement_frames);
+    SetRoomPlacement(MeanOffsetSigma(offsets, times, 0.002), &result);
     for (ScanFrame& f : frames) {
       if (f.posed) {
         f.view.room_from_camera = room_from_sticker_frame * f.view.room_from_camera;
@@ -593,12 +541,15 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   if (options.room_offset_from_surface && result.stickers_on_surface) {
     const Eigen::Vector3d centre = StickerCentre(result.marker_map);
     std::vector<Offset> offsets;
+    std::vector<double> times;
     for (const ScanFrame& f : frames) {
-      if (f.localized && f.surface_pose) offsets.push_back(OffsetAt(f.room_from_camera * f.surface_pose->Inverse(), centre));
+      if (!f.localized || !f.surface_pose) continue;
+      offsets.push_back(OffsetAt(f.room_from_camera * f.surface_pose->Inverse(), centre));
+      times.push_back(f.timestamp_s);
     }
     result.surface_offset_frames = static_cast<int>(offsets.size());
     if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3)) {
-      result.room_placement_sigma_mm = MeanOffsetSigmaMm(offsets, 0.002, &result.room_placement_frames);
+      SetRoomPlacement(MeanOffsetSigma(offsets, times, 0.002), &result);
       const Rigid3d& C = *delta;
       room_offset = C;
       result.surface_offset_shift_m = C * centre - centre;
@@ -621,11 +572,12 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
                            "to tell how well; record the scan again with the room markers beside the couch "
                            "in view for a few seconds",
                            result.room_placement_frames)
-            : StringPrintf("the body scan is placed in the room by %d frames that see the room map, known to "
-                           "%.2f mm at the stickers (1 sigma; tolerance %.2f mm); record the scan again with "
-                           "the room markers beside the couch in view for longer",
-                           result.room_placement_frames, result.room_placement_sigma_mm,
-                           options.max_room_placement_sigma_mm));
+            : StringPrintf("the body scan is placed in the room by %d frames that see the room map, in %d "
+                           "run(s) of consecutive frames, known to %.2f mm at the stickers (1 sigma; tolerance "
+                           "%.2f mm); record the scan again with the room markers beside the couch in view for "
+                           "longer, from several places along the couch",
+                           result.room_placement_frames, result.room_placement_runs,
+                           result.room_placement_sigma_mm, options.max_room_placement_sigma_mm));
   }
   // How far tracking can read the stickers with this camera.
   const double readable_px = ReadableMarkerSidePx(detector.marker_bits());

@@ -168,10 +168,12 @@ struct SessionStageResult {
   int surface_offset_frames = 0;
   Eigen::Vector3d surface_offset_shift_m = Eigen::Vector3d::Zero();
   /// How well the scan is placed in the room: the frames the room map
-  /// localised whose offsets gave the placement, and its 1-sigma error at
-  /// the stickers (mm; the spread of those offsets over the square root of
-  /// their number; infinity below 3 frames).
+  /// localised whose offsets gave the placement, the runs of consecutive
+  /// frames among them, and its 1-sigma error at the stickers (mm, largest
+  /// axis; the spread of those offsets over the square root of the runs:
+  /// MeanOffsetSigma; infinity below 3 frames).
   int room_placement_frames = 0;
+  int room_placement_runs = 0;
   double room_placement_sigma_mm = std::numeric_limits<double>::infinity();
   /// How far this camera reads the stickers face-on (m): where they are
   /// ReadableMarkerSidePx across.

@@ -46,7 +46,7 @@ for s in $(seq "$FIRST" "$LAST"); do
   "$ARPOS" evaluate --gt "$C/body_scan/body_groundtruth.txt" --est "$C.out/model_pose.txt" --json > "$C.eval.json"
   t=$(sed -n 's/.*"translation_mm": *{[^}]*"mean": *\([0-9.e+-]*\).*/\1/p' "$C.eval.json")
   r=$(sed -n 's/.*"rotation_deg": *{[^}]*"mean": *\([0-9.e+-]*\).*/\1/p' "$C.eval.json")
-  place=$(grep -o "placed in the room from [0-9]* frames, [0-9.]* mm" "$C.session.txt" | head -1)
+  place=$(grep -o "placed in the room from [0-9]* frames in [0-9]* run(s), [0-9.]* mm" "$C.session.txt" | head -1)
   motion=$(grep -o "[0-9]* of [0-9]* surface patches moved\|no part of the surface moved\|surface motion not measured" \
     "$C.session.txt" | head -1)
   echo "seed $s $resp scale $sc field $fi breathing $br: $t mm $r deg | $place | $motion"

@@ -261,13 +261,15 @@ TEST(SessionStage, RoomOffsetFromFramesRegisteredToTheSurface) {
   // session, and honest (the error within 3 sigma and 1 mm for the rest).
   const size_t at = r.session_summary.find("the scan placed in the room from ");
   ASSERT_NE(at, std::string::npos) << r.session_summary;
-  int frames = 0;
+  int frames = 0, runs = 0;
   double sigma_mm = 0;
-  ASSERT_EQ(std::sscanf(r.session_summary.c_str() + at, "the scan placed in the room from %d frames, %lf mm", &frames,
-                        &sigma_mm),
-            2)
+  ASSERT_EQ(std::sscanf(r.session_summary.c_str() + at, "the scan placed in the room from %d frames in %d run(s), %lf mm",
+                        &frames, &runs, &sigma_mm),
+            3)
       << r.session_summary;
   EXPECT_GE(frames, 3);
+  EXPECT_GE(runs, 1);
+  EXPECT_LE(runs, frames);
   EXPECT_GT(sigma_mm, 0.0);
   EXPECT_LT(e.translation_mm, 3 * sigma_mm + 1.0);
   const auto session = db->GetSession(r.session_id);
