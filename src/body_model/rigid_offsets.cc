@@ -24,6 +24,22 @@ std::vector<bool> KeptOffsets(const std::vector<Offset>& offsets, double margin_
   return kept;
 }
 
+// Runs of consecutive frames among the kept offsets: a run breaks where the
+// time to the next kept frame exceeds 1.5 x the shortest such step.
+int RunsOf(const std::vector<bool>& kept, const std::vector<double>& times_s) {
+  std::vector<double> t;
+  for (size_t k = 0; k < kept.size(); ++k) {
+    if (kept[k]) t.push_back(times_s[k]);
+  }
+  if (t.empty()) return 0;
+  std::sort(t.begin(), t.end());
+  double shortest = std::numeric_limits<double>::infinity();
+  for (size_t i = 1; i < t.size(); ++i) shortest = std::min(shortest, t[i] - t[i - 1]);
+  int runs = 1;
+  for (size_t i = 1; i < t.size(); ++i) runs += t[i] - t[i - 1] > 1.5 * shortest ? 1 : 0;
+  return runs;
+}
+
 }  // namespace
 
 Offset OffsetAt(const Rigid3d& offset, const Eigen::Vector3d& centre) {
@@ -55,18 +71,12 @@ OffsetMeanSigma MeanOffsetSigma(const std::vector<Offset>& offsets, const std::v
   OffsetMeanSigma result;
   result.sigma_mm = std::numeric_limits<double>::infinity();
   const std::vector<bool> kept = KeptOffsets(offsets, margin_m);
+  result.runs = RunsOf(kept, times_s);
   std::vector<size_t> order;
   for (size_t k = 0; k < offsets.size(); ++k) {
     if (kept[k]) order.push_back(k);
   }
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return times_s[a] < times_s[b]; });
   result.frames = static_cast<int>(order.size());
-  if (order.empty()) return result;
-  std::vector<double> steps;
-  for (size_t i = 1; i < order.size(); ++i) steps.push_back(times_s[order[i]] - times_s[order[i - 1]]);
-  const double shortest = steps.empty() ? 0 : *std::min_element(steps.begin(), steps.end());
-  result.runs = 1 + static_cast<int>(std::count_if(steps.begin(), steps.end(),
-                                                   [&](double s) { return s > 1.5 * shortest; }));
   if (order.size() < 3) return result;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (size_t k : order) mean += offsets[k].tail<3>();

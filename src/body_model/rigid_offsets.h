@@ -21,7 +21,9 @@ Offset OffsetAt(const Rigid3d& offset, const Eigen::Vector3d& centre);
 /// The mean of `offsets`, leaving out those whose shift exceeds 3 x the
 /// median shift + `margin_m` (an offset pulled wrongly); small angles, plain
 /// means. The mean as a rotation about `centre` followed by the shift;
-/// nullopt with fewer than `min_count` offsets kept.
+/// nullopt with fewer than `min_count` offsets kept. Every frame weighs the
+/// same: weighing each run of consecutive frames the same instead placed 8 of
+/// 10 near-couch simulated scans worse (benchmark/accuracy.md).
 std::optional<Rigid3d> RobustMeanOffset(const std::vector<Offset>& offsets, const Eigen::Vector3d& centre,
                                         double margin_m, size_t min_count);
 
