@@ -346,14 +346,17 @@ int main(int argc, char** argv) {
       int lost = 0, lost_with_marker = 0;  // lost frames, and those with a mapped room marker detected
       double ms = 0;
       LocalizationTimings sum_t;
+      // Read once and held: a range-for over *seq.CameraGroundTruth() would
+      // walk a vector inside a temporary already destroyed.
+      const std::optional<std::vector<StampedPose>> camera_truth = seq.CameraGroundTruth();
       for (size_t i = 0; i < seq.size(); ++i) {
         RgbdFrame frame = seq.LoadFrame(i, folder.config.camera);
         // As tracking reads it: the map's depth correction removed.
         if (!frame.depth.empty()) CorrectDepthImage(folder.config.camera, build.map.depth_correction, &frame.depth);
-        if (std::getenv("FLOOR_CHECK") && seq.CameraGroundTruth()) {
+        if (std::getenv("FLOOR_CHECK") && camera_truth) {
           // The floor (room z = 0) as the depth shows it from the true camera.
           const CameraIntrinsics& K = folder.config.camera;
-          for (const auto& g : *seq.CameraGroundTruth()) {
+          for (const auto& g : *camera_truth) {
             if (std::abs(g.timestamp_s - frame.timestamp_s) > 1e-4) continue;
             double n = 0, sz = 0, su = 0, suu = 0, suz = 0, sdz = 0;
             for (int v = 4; v < K.height; v += 8) {
@@ -378,7 +381,7 @@ int main(int argc, char** argv) {
           // Diagnostic: every frame relocalised from its true pose (what the
           // data alone says near the truth: a wrong pose here is the map's or
           // the matching's, not the search's).
-          for (const auto& g : *seq.CameraGroundTruth()) {
+          for (const auto& g : *camera_truth) {
             if (std::abs(g.timestamp_s - frame.timestamp_s) < 1e-4) {
               localizer.Reset();
               localizer.SuggestSearchStart(g.room_from_x);

@@ -64,7 +64,9 @@ TEST(SimulatorSource, RendersTheCasesOwnTrackingFramesLive) {
     EXPECT_LT(ComputePoseError((*camera_truth)[n].room_from_x, *frame.true_room_from_camera).translation_mm, 0.01);
     EXPECT_LT(ComputePoseError((*body_truth)[n].room_from_x, *frame.true_room_from_model).translation_mm, 0.01);
     // Paced: 5 ms apart at 200 fps (not faster; how much slower is the machine's).
-    if (n > 0) EXPECT_GE(frame.arrival - previous, std::chrono::microseconds(4000));
+    if (n > 0) {
+      EXPECT_GE(frame.arrival - previous, std::chrono::microseconds(4000));
+    }
     previous = frame.arrival;
     ++n;
   }

@@ -265,7 +265,11 @@ TEST(AuditChain, ARoomMapsSurfaceIsSealedWithIt) {
       map.plan_id = PlanId(1);
       map.origin_marker_id = 0;
       map.marker_size_m = 0.1;
-      map.markers = {{0, {}, 0.1, 5}};
+      RoomMapMarker marker;
+      marker.corners_in_room.fill(Eigen::Vector3d::Zero());
+      marker.residual_px = 0.1;
+      marker.num_observations = 5;
+      map.markers = {marker};
       if (surface) {
         map.surface_voxel_m = 0.03;
         map.surface.points = {{0.f, 1.f, 0.f}, {0.5f, 1.f, 0.3f}};
