@@ -69,7 +69,6 @@ OffsetMeanSigma MeanOffsetSigma(const std::vector<Offset>& offsets, const std::v
                                 double margin_m) {
   ARPOS_CHECK(times_s.size() == offsets.size(), "one time per offset");
   OffsetMeanSigma result;
-  result.sigma_mm = std::numeric_limits<double>::infinity();
   const std::vector<bool> kept = KeptOffsets(offsets, margin_m);
   result.runs = RunsOf(kept, times_s);
   std::vector<size_t> order;

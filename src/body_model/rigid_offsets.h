@@ -3,6 +3,7 @@
 // camera against its pose on the reconstruction, a GICP correction against
 // none), their robust mean and how well that mean is known.
 
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -37,7 +38,7 @@ struct OffsetMeanSigma {
   /// same place and share their error, so each run counts once (over the
   /// square root of the frames the figure read 1.1-1.7x low).
   /// Infinity with fewer than 3 frames kept (two cannot show their spread).
-  double sigma_mm = 0;
+  double sigma_mm = std::numeric_limits<double>::infinity();
 };
 /// A run breaks where the time to the next kept frame exceeds 1.5 x the
 /// shortest such step. `times_s` must have one entry per offset.
