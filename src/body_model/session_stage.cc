@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <map>
 #include <sstream>
 
 #include "body_model/rigid_offsets.h"
@@ -74,6 +75,37 @@ RegistrationResult RefineOnModel(const PointCloud& scene, const PointCloud& mode
     estimate = result.target_from_source;
   }
   return result;
+}
+
+// Why a scan that reads room markers is placed by few or none of them: the
+// room markers it read that the map does not hold, and those the map holds
+// near the planned isocentre (within 2 m; every one when none is).
+std::string DescribeUnmappedRoomMarkers(const std::vector<std::pair<int, int>>& unmapped, const RoomMap& map,
+                                        const Eigen::Vector3d& isocentre_in_room) {
+  std::vector<int> near, all;
+  for (const RoomMapMarkerEntry& m : map.markers) {
+    all.push_back(m.id);
+    if ((m.room_from_marker.translation - isocentre_in_room).norm() < 2.0) near.push_back(m.id);
+  }
+  const std::vector<int>& listed = near.empty() ? all : near;
+  std::ostringstream held;
+  for (size_t i = 0; i < listed.size(); ++i) held << (i ? ", " : "") << listed[i];
+  std::ostringstream out;
+  if (unmapped.empty()) {
+    out << "the scan reads no room marker the map holds (the map holds " << (near.empty() ? "" : "near the couch ")
+        << held.str() << "): record the scan again with those in view for a few seconds";
+    return out.str();
+  }
+  out << "the scan reads room marker(s) ";
+  for (size_t i = 0; i < unmapped.size(); ++i) {
+    out << (i ? ", " : "") << unmapped[i].first << " (" << unmapped[i].second << " frame"
+        << (unmapped[i].second == 1 ? "" : "s") << ")";
+  }
+  out << " that the room map does not hold (a plan leaves out markers seen in fewer than 3 views of the room "
+         "recording, or not linked to the origin marker): record the room again with them in view from several "
+         "places, or the scan with the map's markers in view (it holds "
+      << (near.empty() ? "" : "near the couch ") << held.str() << ")";
+  return out.str();
 }
 
 }  // namespace
@@ -338,6 +370,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     std::optional<Rigid3d> surface_pose;      ///< registered to the reconstruction (step 4)
   };
   std::vector<ScanFrame> frames;
+  std::map<int, int> unmapped_reads;  // room marker id -> frames that read it, not in the map
   double t_localize = 0, t_markers = 0, t_recon = 0;
   for (size_t i = 0; i < scan.size(); ++i) {
     const bool for_markers = i % marker_step == 0;
@@ -357,6 +390,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     f.localized = located.ok;
     f.room_from_camera = located.room_from_camera;
     result.frames_localized += located.ok ? 1 : 0;
+    for (int id : located.unmapped_marker_ids) ++unmapped_reads[id];
     t0 = Clock::now();
     f.view = MakeBodyScanView(frame, located.ok ? located.room_from_camera : Rigid3d::Identity(), &detector,
                               camera, sticker_size);
@@ -372,9 +406,11 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     t_markers += SecondsSince(t0);
     frames.push_back(std::move(f));
   }
+  result.unmapped_room_markers.assign(unmapped_reads.begin(), unmapped_reads.end());
   if (result.frames_localized == 0) {
     ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
-                      << ": the camera could not be localised in the room map in any frame");
+                      << ": the camera could not be localised in the room map in any frame; "
+                      << DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map, plan.room_from_model_target.translation));
   }
 
   // 2. Stickers and cameras made consistent with each other. A body-scan
@@ -578,6 +614,9 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
                            "longer, from several places along the couch",
                            result.room_placement_frames, result.room_placement_runs,
                            result.room_placement_sigma_mm, options.max_room_placement_sigma_mm));
+    if (!result.unmapped_room_markers.empty()) {
+      result.warnings.back() += "; " + DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map, plan.room_from_model_target.translation);
+    }
   }
   // How far tracking can read the stickers with this camera.
   const double readable_px = ReadableMarkerSidePx(detector.marker_bits());

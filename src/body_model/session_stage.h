@@ -151,6 +151,9 @@ struct SessionStageResult {
   int frames = 0;
   int frames_considered = 0;  ///< every marker_frame_step-th or reconstruction_frame_step-th
   int frames_localized = 0;   ///< in the room map
+  /// Room markers the scan read that the room map does not hold (id, frames
+  /// that read it): why a scan that sees room markers may still not be placed.
+  std::vector<std::pair<int, int>> unmapped_room_markers;
   /// Frames the room map could not localise, posed from mapped stickers.
   int frames_posed_by_stickers = 0;
   /// How the scan's camera response was found (estimated, or assumed).

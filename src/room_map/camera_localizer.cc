@@ -130,6 +130,7 @@ struct CameraLocalizer::Impl {
   KeypointSet keypoints;
   std::vector<Eigen::Vector2d> keypoint_px;  // ideal pixels
   std::vector<MarkerObservation> markers;    // map markers in this frame (image pixels)
+  std::vector<int> unmapped_ids;             // room markers read in this frame, not in the map
   std::vector<std::array<Eigen::Vector2d, 4>> marker_px;  // ideal pixels, parallel
   std::vector<std::vector<DepthSample>> marker_depth;      // parallel
   std::vector<MarkerObservation> scratch;
@@ -295,7 +296,12 @@ struct CameraLocalizer::Impl {
   }
 
   void AcceptMarker(const MarkerObservation& obs) {
-    if (map.FindMarker(obs.id) == nullptr) return;
+    if (map.FindMarker(obs.id) == nullptr) {
+      if (std::find(unmapped_ids.begin(), unmapped_ids.end(), obs.id) == unmapped_ids.end()) {
+        unmapped_ids.push_back(obs.id);
+      }
+      return;
+    }
     if (obs.status != MarkerStatus::kRefined && obs.status != MarkerStatus::kPartiallyOccluded) return;
     for (const auto& m : markers) {
       if (m.id == obs.id) return;
@@ -757,6 +763,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   }
   Lap(&mark, &tm.keypoints_ms);
   m.markers.clear();
+  m.unmapped_ids.clear();
   m.marker_px.clear();
   m.marker_depth.clear();
   bool full_detection_done = false;
@@ -947,6 +954,11 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       std::ostringstream why;
       why << m.markers.size() << " map marker(s) and " << m.keypoints.size()
           << " keypoints found; too few agree on a pose";
+      if (!m.unmapped_ids.empty()) {
+        why << "; room marker(s)";
+        for (int id : m.unmapped_ids) why << " " << id;
+        why << " read but not in the room map";
+      }
       if (!not_held.empty()) why << "; " << not_held;
       out.message = why.str();
     }
@@ -954,6 +966,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   m.last_markers_used = out.markers_used;
   m.last_keypoints_used = out.keypoints_used;
   out.markers = m.markers;
+  out.unmapped_marker_ids = m.unmapped_ids;
   tm.total_ms = ThreadCpuMs() - start + keypoints_cpu_ms;
   return out;
 }

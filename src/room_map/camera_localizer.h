@@ -292,6 +292,10 @@ struct LocalizationResult {
   /// The room markers found in this frame (image pixels), for callers that
   /// need them (overlay, audit).
   std::vector<MarkerObservation> markers;
+  /// Room markers (ids in the case's room range) read in this frame that the
+  /// map does not hold (left out of it, or never seen while mapping): what a
+  /// caller names when the frame cannot be placed.
+  std::vector<int> unmapped_marker_ids;
 };
 
 class CameraLocalizer {

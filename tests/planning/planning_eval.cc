@@ -396,16 +396,19 @@ int main(int argc, char** argv) {
           std::string ids;
           for (const auto& o : r.markers) ids += StringPrintf(" %d:%.0f", o.id, o.MeanSidePx());
           double iso_err = -1;
+          Eigen::Vector3d iso_vec = Eigen::Vector3d::Zero();
           for (const auto& g : *frame_truth) {
             if (r.ok && std::abs(g.timestamp_s - frame.timestamp_s) < 1e-4) {
-              iso_err = (r.room_from_camera * (g.room_from_x.Inverse() * truth.isocentre_in_room_m) -
-                         truth.isocentre_in_room_m).norm() * 1000;
+              iso_vec = (r.room_from_camera * (g.room_from_x.Inverse() * truth.isocentre_in_room_m) -
+                         truth.isocentre_in_room_m) * 1000;
+              iso_err = iso_vec.norm();
             }
           }
-          std::cout << StringPrintf("    f%03zu %-11s m%d k%3d p%4d s%4d sig %.2fmm %.3fdeg iso %.2f [%s ]\n", i,
+          std::cout << StringPrintf("    f%03zu %-11s m%d k%3d p%4d s%4d sig %.2fmm %.3fdeg iso %.2f (%+.2f %+.2f %+.2f) [%s ]\n", i,
                                     r.held_by_depth ? "held" : LocalizationStatusName(r.status), r.markers_used, r.keypoints_used,
                                     r.plane_depth_samples, r.surface_depth_samples,
-                                    r.position_sigma_mm, r.rotation_sigma_deg, iso_err, ids.c_str());
+                                    r.position_sigma_mm, r.rotation_sigma_deg, iso_err, iso_vec.x(), iso_vec.y(),
+                                    iso_vec.z(), ids.c_str());
         }
         if (!r.ok) {
           ++lost;
