@@ -1,6 +1,7 @@
 #include "body_model/session_stage.h"
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <map>
 #include <sstream>
@@ -202,6 +203,12 @@ void SetRoomPlacement(const OffsetMeanSigma& placement, SessionStageResult* resu
   result->room_placement_sigma_mm = placement.sigma_mm;
 }
 
+// A localised frame's 1-sigma error (mm) at a point `distance_m` from the
+// camera: its position sigma and its rotation sigma acting over that reach.
+double FrameSigmaAtMm(double position_sigma_mm, double rotation_sigma_deg, double distance_m) {
+  return std::hypot(position_sigma_mm, rotation_sigma_deg * M_PI / 180 * 1000 * distance_m);
+}
+
 // The mean position of the mapped stickers (zero without any).
 Eigen::Vector3d StickerCentre(const BodyMarkerMapResult& map) {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
@@ -362,6 +369,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     double timestamp_s = 0;
     bool localized = false;
     Rigid3d room_from_camera;  ///< the room map's pose (when localized)
+    double pos_sigma_mm = 0, rot_sigma_deg = 0;  ///< the localiser's (when localized)
     bool posed = false;        ///< a final pose exists
     bool by_stickers = false;  ///< posed from mapped stickers (last round)
     BodyScanView view;         ///< stickers (room_from_camera: the final pose)
@@ -389,6 +397,8 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     f.timestamp_s = frame.timestamp_s;
     f.localized = located.ok;
     f.room_from_camera = located.room_from_camera;
+    f.pos_sigma_mm = located.position_sigma_mm;
+    f.rot_sigma_deg = located.rotation_sigma_deg;
     result.frames_localized += located.ok ? 1 : 0;
     for (int id : located.unmapped_marker_ids) ++unmapped_reads[id];
     t0 = Clock::now();
@@ -578,14 +588,21 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     const Eigen::Vector3d centre = StickerCentre(result.marker_map);
     std::vector<Offset> offsets;
     std::vector<double> times;
+    std::vector<double> weights;
+    const double floor_mm = options.room_placement_weight_floor_mm;
     for (const ScanFrame& f : frames) {
       if (!f.localized || !f.surface_pose) continue;
       offsets.push_back(OffsetAt(f.room_from_camera * f.surface_pose->Inverse(), centre));
       times.push_back(f.timestamp_s);
+      if (floor_mm > 0) {
+        const double at_mm = FrameSigmaAtMm(f.pos_sigma_mm, f.rot_sigma_deg,
+                                            (f.room_from_camera.translation - centre).norm());
+        weights.push_back(1.0 / (at_mm * at_mm + floor_mm * floor_mm));
+      }
     }
     result.surface_offset_frames = static_cast<int>(offsets.size());
-    if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3)) {
-      SetRoomPlacement(MeanOffsetSigma(offsets, times, 0.002), &result);
+    if (const auto delta = RobustMeanOffset(offsets, centre, 0.002, 3, weights)) {
+      SetRoomPlacement(MeanOffsetSigma(offsets, times, 0.002, weights), &result);
       const Rigid3d& C = *delta;
       room_offset = C;
       result.surface_offset_shift_m = C * centre - centre;

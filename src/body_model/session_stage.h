@@ -94,6 +94,15 @@ struct SessionStageOptions {
   /// Then the room offset again from every room-localised frame registered
   /// to the reconstruction (BuildSession, step 5).
   bool room_offset_from_surface = true;
+  /// Each frame's offset in that mean weighs 1 / (s^2 + floor^2), s the
+  /// localiser's 1-sigma error of the frame at the stickers (its position
+  /// and rotation sigmas carried there), the floor (mm) standing for what
+  /// the frames share and their sigmas leave out (the map's own error near
+  /// the couch). 0: every frame weighs the same. Measured on 69 random
+  /// xtion scans (benchmark/accuracy.md, session 28): 1.5 mm placed the
+  /// near-couch scans better on 22 of 34 (1.40 -> 1.27 and 1.98 -> 1.74 mm
+  /// mean model pose on two sets), 3 mm about the same.
+  double room_placement_weight_floor_mm = 1.5;
   /// Fewer mapped body stickers than this: the stage stops with an error
   /// (tracking follows the patient by them; one or two give a weak pose).
   int min_stickers = 3;

@@ -91,5 +91,57 @@ TEST(RigidOffsets, TheStatedSigmaHoldsWhenConsecutiveFramesShareTheirError) {
   EXPECT_GT(beyond_by_frames, trials / 6);
 }
 
+TEST(RigidOffsets, WeightsMoveTheMeanAndTheRunsCountByWhatTheyWeigh) {
+  std::mt19937 rng(10);
+  // Two runs of 5 frames, +1 and -1 mm along x; the first weighs 4 per frame.
+  const Runs r = MakeRuns({{1, 0, 0}, {-1, 0, 0}}, 5, 0.0, &rng);
+  std::vector<double> weights(10, 1.0);
+  for (int k = 0; k < 5; ++k) weights[k] = 4.0;
+  const auto mean = RobustMeanOffset(r.offsets, Eigen::Vector3d::Zero(), 0.002, 3, weights);
+  ASSERT_TRUE(mean.has_value());
+  EXPECT_NEAR(1000 * mean->translation.x(), 0.6, 1e-9);
+  const OffsetMeanSigma s = MeanOffsetSigma(r.offsets, r.times, 0.002, weights);
+  EXPECT_EQ(s.runs, 2);
+  EXPECT_NEAR(s.effective_runs, 25.0 * 25.0 / (20.0 * 20.0 + 5.0 * 5.0), 1e-9);
+  // Equal weights: the runs themselves.
+  EXPECT_NEAR(MeanOffsetSigma(r.offsets, r.times, 0.002).effective_runs, 2.0, 1e-9);
+  EXPECT_ANY_THROW(RobustMeanOffset(r.offsets, Eigen::Vector3d::Zero(), 0.002, 3, {1.0, 2.0}));
+}
+
+// Runs of unequal quality, each weighed by the inverse of its known error
+// variance: the weighted mean is closer to the truth than the plain one, and
+// its stated sigma still holds.
+TEST(RigidOffsets, WeighingRunsByTheirErrorHelpsAndItsSigmaHolds) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> run_sigma(0.3, 3.0);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  int beyond = 0;
+  double sq_weighted = 0, sq_plain = 0;
+  const int trials = 2000;
+  for (int t = 0; t < trials; ++t) {
+    std::vector<Eigen::Vector3d> errors;
+    std::vector<double> sigmas;
+    for (int k = 0; k < 5; ++k) {
+      sigmas.push_back(run_sigma(rng));
+      errors.push_back(sigmas.back() * Eigen::Vector3d(unit(rng), unit(rng), unit(rng)));
+    }
+    const Runs r = MakeRuns(errors, 5, 0.2, &rng);
+    std::vector<double> weights;
+    for (double s : sigmas) {
+      for (int k = 0; k < 5; ++k) weights.push_back(1.0 / (s * s));
+    }
+    const OffsetMeanSigma s = MeanOffsetSigma(r.offsets, r.times, 0.002, weights);
+    const auto weighted = RobustMeanOffset(r.offsets, Eigen::Vector3d::Zero(), 0.002, 3, weights);
+    const auto plain = RobustMeanOffset(r.offsets, Eigen::Vector3d::Zero(), 0.002, 3);
+    ASSERT_TRUE(weighted.has_value() && plain.has_value());
+    const double error_mm = 1000 * weighted->translation.x();
+    sq_weighted += error_mm * error_mm;
+    sq_plain += std::pow(1000 * plain->translation.x(), 2);
+    beyond += std::abs(error_mm) > 2 * s.sigma_mm;
+  }
+  EXPECT_LT(sq_weighted, 0.8 * sq_plain);
+  EXPECT_LT(beyond, trials / 10);
+}
+
 }  // namespace
 }  // namespace arpos
