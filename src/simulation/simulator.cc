@@ -511,6 +511,7 @@ OriginVisibility Simulator::MeasureOriginVisibility(const SequencePlan& room) co
     std::sort(angles.begin(), angles.end());
     v.median_side_px = sides[sides.size() / 2];
     v.min_side_px = sides.front();
+    v.max_side_px = sides.back();
     v.median_angle_deg = angles[angles.size() / 2];
   }
   return v;
@@ -610,9 +611,14 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
     }
   }
   const int poor_at_most = std::max(5, room->frames / 8);
-  // A drawn view that sees the marker too rarely (hidden, off the image), or
-  // for poor visibility too often, is drawn again; after 12 tries the walk
-  // falls back to good views.
+  // The glance of poor visibility is 30-40 px wide at its key view; the walk
+  // passes the key at its own pace, so its best frame may be smaller, and the
+  // couch may hide the key view: below this the marker is not readable at
+  // 50-70 deg (a 6-cell marker under 2.5 px per cell across its short sides).
+  const double poor_at_least_px = 25;
+  // A drawn view that sees the marker too rarely (hidden, off the image), for
+  // poor visibility too often or never at a readable size, is drawn again;
+  // after 12 tries the walk falls back to good views.
   for (int attempt = 0; attempt < 16; ++attempt) {
     if (attempt == 12) {
       visibility = "good";
@@ -644,7 +650,8 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
     room->camera.PaceLikeAWalk();
     origin_visibility_ = MeasureOriginVisibility(*room);
     const bool too_often = visibility == "poor" && attempt < 10 && origin_visibility_.visible_frames > poor_at_most;
-    if (origin_visibility_.visible_frames >= needed && !too_often) break;
+    const bool too_small = visibility == "poor" && origin_visibility_.max_side_px < poor_at_least_px;
+    if (origin_visibility_.visible_frames >= needed && !too_often && !too_small) break;
   }
   conditions_.origin_visibility = visibility;
 }
@@ -881,6 +888,7 @@ SimulationTruth Simulator::Truth() const {
     add("room_frames", std::to_string(v.frames));
     add("origin_median_side_px", num(v.median_side_px, "%.1f"));
     add("origin_min_side_px", num(v.min_side_px, "%.1f"));
+    add("origin_max_side_px", num(v.max_side_px, "%.1f"));
     add("origin_median_view_angle_deg", num(v.median_angle_deg, "%.1f"));
     add("room_marker_count", std::to_string(world_.room_markers.size() - 1));
     add("room_marker_size_m", num(c.room_marker_size_m, "%.3f"));

@@ -113,6 +113,7 @@ struct OriginVisibility {
   int visible_frames = 0;
   double median_side_px = 0;    ///< mean side length in the image, median over visible frames
   double min_side_px = 0;
+  double max_side_px = 0;
   double median_angle_deg = 0;  ///< viewing angle off the marker normal, median over visible frames
 };
 
