@@ -191,14 +191,20 @@ TEST(SessionStage, SampleSessionGivesStickersReconstructionAndModelPose) {
 // The stage's algorithm needs no store: the room map built from the case,
 // the case's model and target pose in, a model pose and stickers out; a
 // cancel request stops it between steps.
-TEST(SessionStage, TheStageRunsWithoutAStoreAndStopsWhenCancelled) {
-  TempDir dir;
-  const fs::path case_dir = CopySample(dir);
-  const CaseFolder folder = LoadCaseFolder(case_dir);
+// What the session stage takes from a plan, made from the case itself.
+SessionPlanInputs PlanInputsOf(const CaseFolder& folder) {
   SessionPlanInputs plan;
   plan.room_map = BuildCaseRoomMap(folder, RoomMapStageOptions()).map;
   plan.model = LoadTriangleMesh(folder.reference_model);
   plan.room_from_model_target = folder.room_from_model_target;
+  return plan;
+}
+
+TEST(SessionStage, TheStageRunsWithoutAStoreAndStopsWhenCancelled) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  const CaseFolder folder = LoadCaseFolder(case_dir);
+  const SessionPlanInputs plan = PlanInputsOf(folder);
   SessionStageOptions options;
   options.case_dir = case_dir;
   std::vector<std::string> steps;
@@ -242,10 +248,7 @@ TEST(SessionStage, AScanWhoseRoomMarkersTheMapLacksNamesThem) {
   TempDir dir;
   const fs::path case_dir = CopySample(dir);
   const CaseFolder folder = LoadCaseFolder(case_dir);
-  SessionPlanInputs plan;
-  plan.room_map = BuildCaseRoomMap(folder, RoomMapStageOptions()).map;
-  plan.model = LoadTriangleMesh(folder.reference_model);
-  plan.room_from_model_target = folder.room_from_model_target;
+  SessionPlanInputs plan = PlanInputsOf(folder);
   // Only the origin marker and no keypoint layer: nothing the scan sees.
   std::set<int> removed;
   std::vector<RoomMapMarkerEntry> kept;
