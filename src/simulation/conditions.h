@@ -16,7 +16,8 @@
 ///   it from 1.2-2 m, 10-35 deg off its normal), medium 0.3 (one view from
 ///   1.6-2.4 m, 35-55 deg), poor 0.3 (one glancing view: the marker 30-40 px
 ///   wide, 50-70 deg off its normal, off the image centre: a few frames of a
-///   60-frame walk, the best at least 25 px, else the walk is drawn again);
+///   60-frame walk, the best at least 25 px (4x4; more for markers of more
+///   cells), else the walk is drawn again);
 /// - room markers: one size for all (0.10-0.20 m, case.yaml has one), 6-25
 ///   of the 25 standard places (the four beside the couch always kept: the
 ///   body scan starts and ends on them);

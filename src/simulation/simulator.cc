@@ -490,8 +490,12 @@ bool Simulator::OriginSeen(const Rigid3d& world_from_camera, double* side_px,
   }
   *side_px = 0;
   for (int k = 0; k < 4; ++k) *side_px += 0.25 * (px[(k + 1) % 4] - px[k]).norm();
-  // Too small to decode (6 cells of 2.5 px).
-  return *side_px >= 15;
+  // Too small to decode (cells of 2.5 px: 15 px for a 4x4 marker).
+  return *side_px >= 2.5 * MarkerCells();
+}
+
+int Simulator::MarkerCells() const {
+  return cv::aruco::getPredefinedDictionary(ArucoDictionaryId(options_.dictionary))->markerSize + 2;
 }
 
 OriginVisibility Simulator::MeasureOriginVisibility(const SequencePlan& room) const {
@@ -614,8 +618,9 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
   // The glance of poor visibility is 30-40 px wide at its key view; the walk
   // passes the key at its own pace, so its best frame may be smaller, and the
   // couch may hide the key view: below this the marker is not readable at
-  // 50-70 deg (a 6-cell marker under 2.5 px per cell across its short sides).
-  const double poor_at_least_px = 25;
+  // 50-70 deg (under 2.5 px per cell across its short sides; 25 px for the
+  // 6 cells of a 4x4 marker).
+  const double poor_at_least_px = 25.0 / 6 * MarkerCells();
   // A drawn view that sees the marker too rarely (hidden, off the image), for
   // poor visibility too often or never at a readable size, is drawn again;
   // after 12 tries the walk falls back to good views.
