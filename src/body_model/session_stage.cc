@@ -420,7 +420,8 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   if (result.frames_localized == 0) {
     ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
                       << ": the camera could not be localised in the room map in any frame; "
-                      << DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map, plan.room_from_model_target.translation));
+                      << DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map,
+                                                     plan.room_from_model_target.translation));
   }
 
   // 2. Stickers and cameras made consistent with each other. A body-scan
@@ -595,8 +596,9 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       offsets.push_back(OffsetAt(f.room_from_camera * f.surface_pose->Inverse(), centre));
       times.push_back(f.timestamp_s);
       if (floor_mm > 0) {
-        const double at_mm = FrameSigmaAtMm(f.pos_sigma_mm, f.rot_sigma_deg,
-                                            (f.room_from_camera.translation - centre).norm());
+        double at_mm = FrameSigmaAtMm(f.pos_sigma_mm, f.rot_sigma_deg,
+                                      (f.room_from_camera.translation - centre).norm());
+        if (!(at_mm < 1000)) at_mm = 1000;  // a sigma the localiser could not tell: next to nothing
         weights.push_back(1.0 / (at_mm * at_mm + floor_mm * floor_mm));
       }
     }
@@ -632,7 +634,8 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
                            result.room_placement_frames, result.room_placement_runs,
                            result.room_placement_sigma_mm, options.max_room_placement_sigma_mm));
     if (!result.unmapped_room_markers.empty()) {
-      result.warnings.back() += "; " + DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map, plan.room_from_model_target.translation);
+      result.warnings.back() += "; " + DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map,
+                                                                   plan.room_from_model_target.translation);
     }
   }
   // How far tracking can read the stickers with this camera.

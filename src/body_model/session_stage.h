@@ -162,6 +162,8 @@ struct SessionStageResult {
   int frames_localized = 0;   ///< in the room map
   /// Room markers the scan read that the room map does not hold (id, frames
   /// that read it): why a scan that sees room markers may still not be placed.
+  /// (A frame the localiser tracks searches only where the map's markers
+  /// are, so frames after a placed one count less often.)
   std::vector<std::pair<int, int>> unmapped_room_markers;
   /// Frames the room map could not localise, posed from mapped stickers.
   int frames_posed_by_stickers = 0;
