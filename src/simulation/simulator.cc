@@ -200,6 +200,7 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   WorldOptions wo;
   wo.seed = options_.seed;
   wo.dictionary = ArucoDictionaryId(options_.dictionary);
+  marker_cells_ = cv::aruco::getPredefinedDictionary(wo.dictionary)->markerSize + 2;
   wo.body_marker_size_m = options_.sticker_size_m;
   wo.plain_room = options_.room_texture == "plain";
   wo.body_mesh_path =
@@ -491,11 +492,7 @@ bool Simulator::OriginSeen(const Rigid3d& world_from_camera, double* side_px,
   *side_px = 0;
   for (int k = 0; k < 4; ++k) *side_px += 0.25 * (px[(k + 1) % 4] - px[k]).norm();
   // Too small to decode (cells of 2.5 px: 15 px for a 4x4 marker).
-  return *side_px >= 2.5 * MarkerCells();
-}
-
-int Simulator::MarkerCells() const {
-  return cv::aruco::getPredefinedDictionary(ArucoDictionaryId(options_.dictionary))->markerSize + 2;
+  return *side_px >= 2.5 * marker_cells_;
 }
 
 OriginVisibility Simulator::MeasureOriginVisibility(const SequencePlan& room) const {
@@ -620,7 +617,7 @@ void Simulator::PlanRandomRoomWalk(const std::vector<CameraKey>& keys, uint64_t 
   // couch may hide the key view: below this the marker is not readable at
   // 50-70 deg (under 2.5 px per cell across its short sides; 25 px for the
   // 6 cells of a 4x4 marker).
-  const double poor_at_least_px = 25.0 / 6 * MarkerCells();
+  const double poor_at_least_px = 25.0 / 6 * marker_cells_;
   // A drawn view that sees the marker too rarely (hidden, off the image), for
   // poor visibility too often or never at a readable size, is drawn again;
   // after 12 tries the walk falls back to good views.

@@ -223,13 +223,13 @@ class Simulator {
   std::vector<CameraKey> OriginViewKeys(const std::string& visibility, Rng* rng) const;
   OriginVisibility MeasureOriginVisibility(const SequencePlan& room) const;
   bool OriginSeen(const Rigid3d& world_from_camera, double* side_px, double* angle_deg) const;
-  // Cells across a printed marker of the case's dictionary (data bits and
-  // the black border): what decides the size it can be read at.
-  int MarkerCells() const;
   SimulatedFrame ToRoomFrame(SimulatedFrame frame) const;
   void SetUpDistortion(const std::array<double, 5>& coefficients);
 
   SimulationOptions options_;
+  // Cells across a printed marker of the case's dictionary (data bits and
+  // the black border): what decides the size it can be read at.
+  int marker_cells_ = 6;
   SensorProfile profile_;
   World world_;
   std::vector<SequencePlan> sequences_;

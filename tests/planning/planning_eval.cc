@@ -390,14 +390,13 @@ int main(int argc, char** argv) {
         }
         const LocalizationResult r = localizer.Localize(frame);
         if (r.ok) est.push_back({frame.timestamp_s, r.room_from_camera});
-        const auto frame_truth = std::getenv("FRAME_LOC") ? seq.CameraGroundTruth() : std::nullopt;
-        if (frame_truth) {
+        if (std::getenv("FRAME_LOC") && camera_truth) {
           // One line a frame: markers (id:side px), keypoints, sigmas, isocentre transfer error.
           std::string ids;
           for (const auto& o : r.markers) ids += StringPrintf(" %d:%.0f", o.id, o.MeanSidePx());
           double iso_err = -1;
           Eigen::Vector3d iso_vec = Eigen::Vector3d::Zero();
-          for (const auto& g : *frame_truth) {
+          for (const auto& g : *camera_truth) {
             if (r.ok && std::abs(g.timestamp_s - frame.timestamp_s) < 1e-4) {
               iso_vec = (r.room_from_camera * (g.room_from_x.Inverse() * truth.isocentre_in_room_m) -
                          truth.isocentre_in_room_m) * 1000;
