@@ -103,7 +103,7 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     const Args args(argv,
                     {"profile", "seed", "frames", "tracking-sequences", "room-walk", "room-texture", "body-mesh",
                      "png-compression", "supersampling", "response", "depth-scale-error",
-                     "depth-field-mm", "breathing-mm", "distortion", "dictionary", "sticker-size-m"},
+                     "depth-field-mm", "breathing-mm", "distortion", "dictionary", "sticker-size-m", "sharpen"},
                     {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
     if (args.positional().size() != 1) {
       std::cerr << "simulate: expected one OUT_DIR\n" << kUsage;
@@ -129,6 +129,11 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     if (args.Has("depth-field-mm")) options.depth_field_mm = args.GetDouble("depth-field-mm", 0);
     if (args.Has("flying-pixels")) options.flying_pixels = true;
     if (args.Has("breathing-mm")) options.breathing_mm = args.GetDouble("breathing-mm", 0);
+    if (args.Has("sharpen")) {
+      options.sharpen_amount = args.GetDouble("sharpen", 0);
+      if (!(options.sharpen_amount >= 0 && options.sharpen_amount <= 3))
+        ARPOS_INPUT_ERROR("--sharpen: an unsharp-mask amount in [0, 3], got " << options.sharpen_amount);
+    }
     if (auto d = args.Get("distortion")) {
       std::string spaced = *d;
       std::replace(spaced.begin(), spaced.end(), ',', ' ');

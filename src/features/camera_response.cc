@@ -86,7 +86,21 @@ std::string CameraResponse::Serialize() const {
   std::ostringstream out;
   out << name_ << ":";
   for (int v = 0; v < 256; ++v) out << ' ' << StringPrintf("%.4f", table_[v]);
+  if (sharpened()) out << " sharpen " << StringPrintf("%.4f %.4f", sharpen_amount_, sharpen_sigma_px_);
   return out.str();
+}
+
+CameraResponse CameraResponse::WithSharpening(double amount, double sigma_px) const {
+  if (!(amount >= 0 && amount <= 5)) {
+    ARPOS_INPUT_ERROR("camera sharpening amount must be within [0, 5], got " << amount);
+  }
+  if (!(sigma_px >= 0.3 && sigma_px <= 5)) {
+    ARPOS_INPUT_ERROR("camera sharpening radius must be within [0.3, 5] px, got " << sigma_px);
+  }
+  CameraResponse r = *this;
+  r.sharpen_amount_ = amount;
+  r.sharpen_sigma_px_ = sigma_px;
+  return r;
 }
 
 CameraResponse CameraResponse::Parse(const std::string& text, const std::string& what) {
@@ -103,9 +117,17 @@ CameraResponse CameraResponse::Parse(const std::string& text, const std::string&
     }
   }
   std::string extra;
-  if (in >> extra) ARPOS_INPUT_ERROR(what << ": camera response has more than 256 values");
+  double amount = 0, sigma = 1;
+  if (in >> extra) {
+    if (extra != "sharpen" || !(in >> amount >> sigma)) {
+      ARPOS_INPUT_ERROR(what << ": camera response has more than 256 values (or a malformed 'sharpen AMOUNT "
+                                "SIGMA' after them)");
+    }
+    if (in >> extra) ARPOS_INPUT_ERROR(what << ": camera response has text after its sharpening: '" << extra << "'");
+  }
   try {
-    return FromTable(table, text.substr(0, colon));
+    CameraResponse r = FromTable(table, text.substr(0, colon));
+    return amount > 0 ? r.WithSharpening(amount, sigma) : r;
   } catch (const InputError& e) {
     ARPOS_INPUT_ERROR(what << ": " << e.what());
   }

@@ -69,6 +69,16 @@ class CameraResponse {
 
   /// Short name: linear, srgb, gamma2.60, or "estimated".
   const std::string& name() const { return name_; }
+
+  /// The camera's own sharpening after its tone curve (sharpening.h): codes
+  /// were delivered as code + amount * (code - Gaussian(code, sigma_px)).
+  /// 0 = none. Readers of sub-pixel intensities undo it first
+  /// (UndoSharpeningAround). Throws InputError unless amount is in [0, 5]
+  /// and sigma in [0.3, 5] px.
+  CameraResponse WithSharpening(double amount, double sigma_px) const;
+  double sharpen_amount() const { return sharpen_amount_; }
+  double sharpen_sigma_px() const { return sharpen_sigma_px_; }
+  bool sharpened() const { return sharpen_amount_ > 0; }
   const std::array<double, 256>& linear_from_code() const { return table_; }
   double Linearize(int code) const { return table_[code & 255]; }
 
@@ -76,8 +86,9 @@ class CameraResponse {
   double LinearFraction(int code) const { return table_[code & 255] / 255.0; }
 
   /// Text for the store and reports: "name: v0 v1 ... v255" (the table,
-  /// rounded to 1e-4). Parse reads it back (InputError on malformed text,
-  /// naming `what`).
+  /// rounded to 1e-4), followed by " sharpen AMOUNT SIGMA" for a sharpening
+  /// camera. Parse reads it back (InputError on malformed text, naming
+  /// `what`).
   std::string Serialize() const;
   static CameraResponse Parse(const std::string& text, const std::string& what);
 
@@ -93,6 +104,8 @@ class CameraResponse {
  private:
   std::array<double, 256> table_{};
   std::string name_;
+  double sharpen_amount_ = 0;
+  double sharpen_sigma_px_ = 1.0;
 };
 
 class PixelUndistorter;

@@ -6,6 +6,7 @@
 #include <limits>
 
 #include "features/edge_profile.h"
+#include "features/sharpening.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -164,6 +165,7 @@ struct FitOutcome {
 }  // namespace
 
 struct EdgeRefinementWorkspace::Impl {
+  cv::Mat unsharpened;  // the image with a sharpening camera's mask undone around the marker
   std::array<std::vector<BandPixel>, 4> bands;
   std::vector<double> scratch;
   std::array<std::vector<SegmentCheck>, 4> segments;
@@ -620,6 +622,14 @@ Eigen::Vector2d PixelUndistorter::Undistort(const Eigen::Vector2d& distorted_px)
   return {fx_ * x + cx_, fy_ * y + cy_};
 }
 
+namespace {
+
+CornerRefinementResult Refine(const cv::Mat& gray, const std::array<Eigen::Vector2d, 4>& initial_px,
+                              const EdgeRefinementOptions& options, const PixelUndistorter& undistorter,
+                              EdgeRefinementWorkspace::Impl& ws);
+
+}  // namespace
+
 CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
                                            const std::array<Eigen::Vector2d, 4>& initial_px,
                                            const EdgeRefinementOptions& options,
@@ -631,6 +641,22 @@ CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
   std::string reason;
   ARPOS_CHECK(options.Check(&reason), "invalid EdgeRefinementOptions: " << reason);
   EdgeRefinementWorkspace::Impl& ws = workspace->impl();
+  if (!options.response.sharpened()) return Refine(gray, initial_px, options, undistorter, ws);
+  // A sharpening camera: its mask undone where this marker's fit reads.
+  const CameraResponse& r = options.response;
+  const cv::Rect region =
+      MarkerReadRegion(initial_px, options.marker_bits + 2 * options.border_bits, gray.size());
+  UndoSharpening(gray, {region}, r.sharpen_amount(), r.sharpen_sigma_px(), &ws.unsharpened);
+  EdgeRefinementOptions plain = options;
+  plain.response = r.WithSharpening(0, r.sharpen_sigma_px());
+  return Refine(ws.unsharpened, initial_px, plain, undistorter, ws);
+}
+
+namespace {
+
+CornerRefinementResult Refine(const cv::Mat& gray, const std::array<Eigen::Vector2d, 4>& initial_px,
+                              const EdgeRefinementOptions& options, const PixelUndistorter& undistorter,
+                              EdgeRefinementWorkspace::Impl& ws) {
   CornerRefinementResult result;
   result.corners_px = initial_px;
   auto fail = [&](const std::string& why) {
@@ -853,6 +879,8 @@ CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
   result.status = inliers == segments ? MarkerStatus::kRefined : MarkerStatus::kPartiallyOccluded;
   return result;
 }
+
+}  // namespace
 
 CornerRefinementResult RefineMarkerCorners(const cv::Mat& gray,
                                            const std::array<Eigen::Vector2d, 4>& initial_px,

@@ -39,17 +39,54 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
     return it->second;
   };
 
+  EdgeRefinementOptions edge = detector.edge;
+  EdgeRefinementWorkspace workspace;
+  // The camera's sharpening first: estimated on corners refined under the
+  // fallback's curve, then undone around every marker for what follows.
+  const CameraResponse plain_fallback = fallback.WithSharpening(0, fallback.sharpen_sigma_px());
+  double amount = fallback.sharpen_amount(), sigma = fallback.sharpen_sigma_px();
+  if (options.estimate_sharpening) {
+    edge.response = plain_fallback;
+    std::vector<std::vector<MarkerObservation>> refined(frames.size());
+    std::vector<const cv::Mat*> grays;
+    std::vector<const std::vector<MarkerObservation>*> lists;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      for (MarkerObservation m : frames[i].markers) {
+        ApplyRefinement(RefineMarkerCorners(frames[i].gray, m.detected_corners_px, edge, undistorter, &workspace),
+                        &m);
+        if (m.IsPrecise()) refined[i].push_back(m);
+      }
+      grays.push_back(&frames[i].gray);
+      lists.push_back(&refined[i]);
+    }
+    out.sharpening = EstimateSharpening(grays, lists, cells, options.sharpening);
+    if (out.sharpening.ok) amount = out.sharpening.amount, sigma = out.sharpening.sigma_px;
+  }
+  std::vector<ResponseFrame> unsharpened;
+  if (amount > 0) {
+    for (const ResponseFrame& f : frames) {
+      std::vector<cv::Rect> regions;
+      for (const MarkerObservation& m : f.markers) {
+        regions.push_back(MarkerReadRegion(m.detected_corners_px, cells, f.gray.size()));
+      }
+      ResponseFrame u;
+      UndoSharpening(f.gray, regions, amount, sigma, &u.gray);
+      u.markers = f.markers;
+      unsharpened.push_back(std::move(u));
+    }
+  }
+  const std::vector<ResponseFrame>& read = amount > 0 ? unsharpened : frames;
+  out.response = plain_fallback.WithSharpening(amount, sigma);
+
   // Corners refined under the current estimate (the cell grid hangs on
   // them), boundaries collected, the response solved; twice is enough: the
   // widening depends on the corners only through the grid's placement.
-  EdgeRefinementOptions edge = detector.edge;
-  CameraResponse current = fallback;
-  EdgeRefinementWorkspace workspace;
+  CameraResponse current = plain_fallback;
   for (int round = 0; round < options.rounds; ++round) {
     edge.response = current;
     std::vector<MarkerCellEdges> markers;
     int frames_used = 0;
-    for (const ResponseFrame& f : frames) {
+    for (const ResponseFrame& f : read) {
       bool used = false;
       for (const MarkerObservation& m : f.markers) {
         const CornerRefinementResult r =
@@ -65,12 +102,12 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
     }
     out.frames_used = frames_used;
     out.markers_used = static_cast<int>(markers.size());
-    ResponseEstimate est = EstimateCameraResponse(markers, fallback, options.estimation);
+    ResponseEstimate est = EstimateCameraResponse(markers, plain_fallback, options.estimation);
     out.estimate = est;
     if (!est.ok) break;
     const double change = est.response.MaxDifference(current);
     current = est.response;
-    out.response = current;
+    out.response = current.WithSharpening(amount, sigma);
     out.estimated = true;
     if (change < 0.002) break;
   }
@@ -81,6 +118,11 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
     out.message = StringPrintf("camera response not estimated (%s, in %d frames); assumed %s",
                                out.estimate.message.c_str(), out.frames_used,
                                fallback.name().c_str());
+  }
+  if (out.sharpening.ok && out.sharpening.amount > 0) {
+    out.message += "; " + out.sharpening.message;
+  } else if (!out.sharpening.ok && amount > 0) {
+    out.message += StringPrintf("; camera sharpening kept from before (amount %.1f, radius %.1f px)", amount, sigma);
   }
   return out;
 }

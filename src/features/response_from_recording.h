@@ -15,6 +15,7 @@
 
 #include "features/camera_response.h"
 #include "features/marker_detector.h"
+#include "features/sharpening.h"
 #include "sensor/case_config.h"
 #include "sensor/intrinsics.h"
 #include "sensor/sequence.h"
@@ -25,12 +26,17 @@ struct RecordingResponseOptions {
   int max_frames = 40;  ///< frames sampled evenly over the sequence
   int rounds = 2;       ///< refine / estimate alternations (at most)
   ResponseEstimationOptions estimation;
+  /// The camera's sharpening (sharpening.h) is estimated first and undone
+  /// before the response is; off: the fallback's sharpening is kept.
+  bool estimate_sharpening = true;
+  SharpeningEstimationOptions sharpening;
 };
 
 struct RecordingResponse {
   CameraResponse response;
   bool estimated = false;  ///< false: `response` is the fallback
   ResponseEstimate estimate;  ///< the last round's figures
+  SharpeningEstimate sharpening;  ///< ok == false: the fallback's sharpening kept
   int frames_used = 0;
   int markers_used = 0;
   std::string message;  ///< one line for people

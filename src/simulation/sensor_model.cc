@@ -180,6 +180,14 @@ cv::Mat SimulateColor(const cv::Mat& radiance, const SensorProfile& profile, boo
       }
     }
   }
+  if (noise && encoding.sharpen_amount > 0) {
+    cv::Mat codes, blurred;
+    out.convertTo(codes, CV_32FC3);
+    cv::GaussianBlur(codes, blurred, cv::Size(0, 0), encoding.sharpen_sigma_px, encoding.sharpen_sigma_px,
+                     cv::BORDER_REPLICATE);
+    cv::Mat sharpened = codes + encoding.sharpen_amount * (codes - blurred);
+    sharpened.convertTo(out, CV_8UC3);  // rounds and saturates
+  }
   return out;
 }
 

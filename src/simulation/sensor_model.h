@@ -67,6 +67,10 @@ SensorProfile MakeSensorProfile(const std::string& name);
 struct ColorEncoding {
   CameraResponse response = CameraResponse::kSrgb;
   double exposure_stops = 0;  ///< this frame's exposure relative to the profile's
+  /// Unsharp masking of the encoded codes, as a camera's processing does it
+  /// after its tone curve: code + amount * (code - Gaussian(code, sigma)).
+  double sharpen_amount = 0;
+  double sharpen_sigma_px = 1.0;
 };
 
 /// Linear radiance (CV_32FC3 RGB) -> 8-bit BGR as the camera delivers it:

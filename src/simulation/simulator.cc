@@ -772,6 +772,7 @@ SimulatedFrame Simulator::RenderScene(const Scene& scene, bool noise, uint64_t f
   ColorEncoding encoding;
   encoding.response = response_;
   encoding.exposure_stops = scene.exposure_stops;
+  encoding.sharpen_amount = options_.sharpen_amount;
   out.color = SimulateColor(radiance, profile_, noise, frame_key, encoding);
   out.depth = SimulateDepth(out.exact, profile_, noise, frame_key, depth_bias_);
   return out;

@@ -86,6 +86,9 @@ struct SimulationOptions {
   std::optional<double> depth_field_mm;     ///< smooth depth error field, amplitude at 1 m
   std::optional<bool> flying_pixels;        ///< mixed depths at depth edges
   std::optional<double> breathing_mm;       ///< anterior torso, peak to peak
+  /// The camera's own sharpening of the encoded image (unsharp mask amount,
+  /// Gaussian sigma 1 px; 0 = none), as consumer colour cameras do.
+  double sharpen_amount = 0;
   /// Lens distortion of the colour camera (OpenCV k1 k2 p1 p2 k3; the depth
   /// is registered to it): the frames are rendered through it and case.yaml
   /// lists it. Must be invertible over the image.

@@ -6,6 +6,7 @@
 
 #include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "geometry/so3.h"
@@ -276,17 +277,29 @@ cv::Mat RenderMarkers(const CameraIntrinsics& camera, const std::vector<MarkerPl
     cv::GaussianBlur(image, image, cv::Size(0, 0), options.blur_sigma_px, options.blur_sigma_px,
                      cv::BORDER_REFLECT);
   }
-  cv::Mat out(size, CV_8UC1);
+  cv::Mat codes(size, CV_64FC1);
   std::normal_distribution<double> noise(0, options.noise_sigma_grey);
   for (int j = 0; j < size.height; ++j) {
     const double* src = image.ptr<double>(j);
-    uchar* dst = out.ptr<uchar>(j);
+    double* dst = codes.ptr<double>(j);
     for (int i = 0; i < size.width; ++i) {
       const double encoded =
           identity ? src[i] : 255.0 * encode_fraction(std::clamp(src[i] / 255.0, 0.0, 1.0));
-      const double v = encoded + (options.noise_sigma_grey > 0 ? noise(*rng) : 0.0);
-      dst[i] = static_cast<uchar>(std::clamp(std::lround(v), 0L, 255L));
+      dst[i] = encoded + (options.noise_sigma_grey > 0 ? noise(*rng) : 0.0);
     }
+  }
+  if (options.sharpen_amount > 0) {
+    cv::Mat blurred;
+    cv::GaussianBlur(codes, blurred, cv::Size(0, 0), options.sharpen_sigma_px, options.sharpen_sigma_px,
+                     cv::BORDER_REFLECT);
+    codes = codes + options.sharpen_amount * (codes - blurred);
+  }
+  cv::Mat out;
+  codes.convertTo(out, CV_8UC1);  // rounds and saturates
+  if (options.jpeg_quality > 0) {
+    std::vector<uchar> bytes;
+    cv::imencode(".jpg", out, bytes, {cv::IMWRITE_JPEG_QUALITY, options.jpeg_quality});
+    out = cv::imdecode(bytes, cv::IMREAD_GRAYSCALE);
   }
   return out;
 }

@@ -58,6 +58,13 @@ struct RenderOptions {
   /// Any other tone curve: linear fraction (0..1) -> encoded fraction (0..1),
   /// monotone increasing; overrides `gamma` when set.
   std::function<double(double)> encode;
+  /// A camera's own processing after encoding, as consumer cameras do it:
+  /// unsharp masking of the encoded codes (code + amount * (code - blurred
+  /// code), Gaussian of `sharpen_sigma_px`; 0 = none), then JPEG at
+  /// `jpeg_quality` (0 = none).
+  double sharpen_amount = 0;
+  double sharpen_sigma_px = 1.0;
+  int jpeg_quality = 0;
 };
 
 /// The camera response (code -> linear table) of a monotone encoding

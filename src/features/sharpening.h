@@ -1,0 +1,99 @@
+#pragma once
+/// A colour camera's own sharpening, estimated from a recording and undone
+/// where sub-pixel intensities are read.
+///
+/// Why: consumer cameras (and RealSense's default "sharpness") apply an
+/// unsharp mask to the encoded image, after the tone curve:
+///     delivered = code + amount * (code - Gaussian(code, sigma)).
+/// The halo it leaves beside every edge is not a blurred step in any tone
+/// curve, so the edge fits (edge_refinement.h) and the response estimate
+/// (camera_response.h) read it as a steeper curve and a larger marker:
+/// features_bench, sRGB, amount 1, sigma 1 px: corners 0.066 px median off
+/// (0.020 without), marker scale +0.21 %; end to end (random xtion scenes,
+/// sRGB) the model pose at scan time went from 1.39 to 1.95 mm mean over
+/// eight seeds, and to 25 mm on a ninth.
+///
+/// Undoing: the mask is linear in the codes, so for known (amount, sigma)
+/// the codes before it are the fixed point of
+///     E <- (delivered + amount * Gaussian(E, sigma)) / (1 + amount),
+/// a contraction (factor amount / (1 + amount)); a few iterations around
+/// each marker, rounded back to 8 bits. Saturated halos (clipped at 0 or
+/// 255) cannot be restored; markers are mid-grey enough that this is rare.
+///
+/// Estimating: the profile across a marker's outer edge is monotone for any
+/// tone curve and any symmetric blur (and so is any average of such
+/// profiles), while a sharpening halo makes it overshoot on both sides.
+/// Each candidate amount is undone around the markers and the edges'
+/// profiles (+-5.5 px across the middle of each outer edge), normalised to
+/// their own black and white levels, are pooled; the least amount whose
+/// pooled profile is monotone within its noise is taken: undoing more than
+/// the camera did only blurs. Nothing is undone unless the delivered
+/// profile overshoots by more than twice what its noise explains (JPEG at
+/// quality 75-90 does not: features_bench).
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "features/marker_observation.h"
+
+namespace arpos {
+
+/// Rounds `delivered` (CV_8UC1) back through the inverse of the unsharp mask
+/// inside each of `regions` (clipped to the image) into `out`, which gets a
+/// copy of `delivered` elsewhere. `out` may not alias `delivered`.
+void UndoSharpening(const cv::Mat& delivered, const std::vector<cv::Rect>& regions, double amount,
+                    double sigma_px, cv::Mat* out);
+
+/// The region a marker's edge fits read: its corners' bounding box grown by
+/// one and a half cells (the quiet zone and the bands) and 4 px.
+cv::Rect MarkerReadRegion(const std::array<Eigen::Vector2d, 4>& corners_px, int cells_per_side,
+                          const cv::Size& image_size);
+
+struct SharpeningEstimationOptions {
+  /// Candidates: amounts 0, step, 2 step, ... max_amount; the radii listed.
+  /// The radius is poorly told by the profile (a wider mask undone by a
+  /// smaller amount leaves it as monotone, and sharper), so one is assumed:
+  /// features_bench, a camera's 0.7 px mask undone as a 1 px one, corners
+  /// 0.047 -> 0.026 px median (0.020 unsharpened).
+  double amount_step = 0.1;
+  double max_amount = 2.5;
+  std::vector<double> sigmas_px{1.0};
+  /// Profiles reach +-profile_half_width_px across each edge, where the halo
+  /// has faded (about 2.5 times the blur and the mask's radius together),
+  /// or 0.6 of a cell when too few markers have cells that wide; markers
+  /// whose cells span fewer than min_cell_px pixels are not used.
+  double min_cell_px = 5.0;
+  double profile_half_width_px = 5.5;
+  double bin_px = 0.25;
+  /// Edges with less contrast (codes) are not used.
+  double min_contrast_codes = 20;
+  /// Fewer edges: not estimated (amount 0 assumed).
+  int min_edges = 16;
+  int max_markers = 60;
+  std::string Validate() const;
+};
+
+struct SharpeningEstimate {
+  bool ok = false;       ///< false: too few usable edges; amount 0 assumed
+  double amount = 0;
+  double sigma_px = 1.0;
+  int edges_used = 0;
+  /// Overshoot of the pooled profile (sum of its decreases, fraction of
+  /// contrast) as delivered and after undoing the estimate.
+  double overshoot_delivered = 0;
+  double overshoot_after = 0;
+  std::string message;  ///< one line for people
+};
+
+/// `frames`: grey images (CV_8UC1, the camera's codes) with their markers,
+/// whose `corners_px` are refined (any response). `cells_per_side`: marker
+/// bits + 2 border bits of the dictionary.
+SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
+                                      const std::vector<const std::vector<MarkerObservation>*>& markers,
+                                      int cells_per_side, const SharpeningEstimationOptions& options = {});
+
+}  // namespace arpos
