@@ -119,9 +119,9 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
                                out.estimate.message.c_str(), out.frames_used,
                                fallback.name().c_str());
   }
-  if (out.sharpening.ok && out.sharpening.amount > 0) {
+  if (options.estimate_sharpening && (out.sharpening.ok || amount == 0)) {
     out.message += "; " + out.sharpening.message;
-  } else if (!out.sharpening.ok && amount > 0) {
+  } else if (amount > 0) {
     out.message += StringPrintf("; camera sharpening kept from before (amount %.1f, radius %.1f px)", amount, sigma);
   }
   return out;

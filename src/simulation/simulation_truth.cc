@@ -174,10 +174,11 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
           << ", timestamp_s: " << StringPrintf("%.6f", t.sticker_off_timestamp_s) << "}\n";
     }
   }
-  if (t.response != "srgb" || t.auto_exposure) {
+  if (t.response != "srgb" || t.auto_exposure || t.sharpen_amount != 0) {
     out << "camera_response:\n"
         << "  response: " << t.response << "\n"
         << "  auto_exposure: " << (t.auto_exposure ? "true" : "false") << "\n";
+    if (t.sharpen_amount != 0) out << "  sharpen_amount: " << Num(t.sharpen_amount) << "\n";
     if (!t.exposure_waves.empty()) {
       out << "  exposure_waves: [";
       for (size_t i = 0; i < t.exposure_waves.size(); ++i) {
@@ -300,6 +301,7 @@ SimulationTruth LoadSimulationTruth(const std::filesystem::path& path) {
     const std::string w = "camera_response.";
     t.response = r.As<std::string>(r.Need(cr, "response", w), w + "response");
     t.auto_exposure = r.As<bool>(r.Need(cr, "auto_exposure", w), w + "auto_exposure");
+    if (const YAML::Node a = cr["sharpen_amount"]) t.sharpen_amount = r.As<double>(a, w + "sharpen_amount");
     if (const YAML::Node waves = cr["exposure_waves"]) {
       for (size_t i = 0; i < waves.size(); ++i) {
         const auto v = r.As<std::vector<double>>(waves[i], w + "exposure_waves");

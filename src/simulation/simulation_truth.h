@@ -58,6 +58,7 @@
 ///   response: linear             # srgb | linear | gamma2.6 | scurve
 ///   auto_exposure: true
 ///   exposure_waves: [[f_hz, phase_rad, weight_stops], ...]  # stops(t) = sum w sin(2 pi f t + phase), t = timestamp
+///   sharpen_amount: 1.0          # unsharp mask of the encoded codes, Gaussian 1 px (sensor_model.h)
 /// depth_bias:                    # z' = z (1 + scale_error) + field_mm_at_1m / 1000 z^2 F(u, v) (sensor_model.h)
 ///   scale_error: 0.003
 ///   field_mm_at_1m: 2.5
@@ -139,6 +140,7 @@ struct SimulationTruth {
   std::string response = "srgb";
   bool auto_exposure = false;
   std::vector<std::array<double, 3>> exposure_waves;  ///< frequency_hz, phase_rad, weight_stops
+  double sharpen_amount = 0;  ///< the camera's unsharp mask (1 px Gaussian), 0 = none
   // Depth bias (absent: none).
   double depth_scale_error = 0;
   double depth_field_mm_at_1m = 0;

@@ -116,6 +116,7 @@ std::string SimulationOptions::Check() const {
     return "depth-field-mm: must be 0..50";
   }
   if (breathing_mm && !(*breathing_mm >= 0 && *breathing_mm <= 30)) return "breathing-mm: must be 0..30";
+  if (!(sharpen_amount >= 0 && sharpen_amount <= 3)) return "sharpen: must be 0..3";
   if (const int id = ArucoDictionaryId(dictionary); id < 0) {
     return "dictionary: unknown ArUco dictionary '" + dictionary + "'";
   } else if (cv::aruco::getPredefinedDictionary(id)->bytesList.rows < 200) {
@@ -192,7 +193,7 @@ void Simulator::SetUpDistortion(const std::array<double, 5>& coefficients) {
 
 Simulator::Simulator(const SimulationOptions& options) : options_(options) {
   const std::string problem = options_.Check();
-  if (!problem.empty()) ARPOS_INPUT_ERROR("simulate: " << problem);
+  if (!problem.empty()) ARPOS_INPUT_ERROR("simulation options: " << problem);
   profile_ = MakeSensorProfile(options_.profile);
   if (options_.supersampling > 0) profile_.supersampling = options_.supersampling;
   render_intrinsics_ = profile_.intrinsics;
@@ -862,6 +863,7 @@ SimulationTruth Simulator::Truth() const {
   }
   t.response = ResponseName(response_);
   t.auto_exposure = auto_exposure_.enabled();
+  t.sharpen_amount = options_.sharpen_amount;
   for (const auto& w : auto_exposure_.waves) {
     t.exposure_waves.push_back({w.frequency_hz, w.phase_rad, w.weight_stops});
   }

@@ -233,6 +233,35 @@ TEST(CameraResponse, AutoExposureChangesBrightnessSmoothlyByUpToAStop) {
   }
 }
 
+// The camera's sharpening: the delivered codes are the unsharpened ones
+// through the unsharp mask (Gaussian 1 px), and simulation.yaml says so.
+TEST(CameraResponse, SharpeningIsAnUnsharpMaskOfTheCodesAndIsRecorded) {
+  SimulationOptions o = SmallOptions();
+  o.room_frames = 1;
+  const Simulator plain(o);
+  o.sharpen_amount = 0.8;
+  const Simulator sharp(o);
+  const cv::Mat a = plain.RenderFrame(0, 0).color, b = sharp.RenderFrame(0, 0).color;
+  cv::Mat codes, blurred, expected;
+  a.convertTo(codes, CV_32FC3);
+  cv::GaussianBlur(codes, blurred, cv::Size(0, 0), 1.0, 1.0, cv::BORDER_REPLICATE);
+  cv::Mat(codes + 0.8 * (codes - blurred)).convertTo(expected, CV_8UC3);
+  cv::Mat diff;
+  cv::absdiff(b, expected, diff);
+  double worst = 0;
+  cv::minMaxLoc(diff.reshape(1), nullptr, &worst);
+  EXPECT_LE(worst, 1);
+  cv::absdiff(a, b, diff);
+  double changed = 0;
+  cv::minMaxLoc(diff.reshape(1), nullptr, &changed);
+  EXPECT_GT(changed, 10) << "the mask changed nothing";
+  TempDir dir("arpos_sim_sharpen");
+  SaveSimulationTruth(sharp.Truth(), dir.path() / "simulation.yaml");
+  EXPECT_DOUBLE_EQ(LoadSimulationTruth(dir.path() / "simulation.yaml").sharpen_amount, 0.8);
+  o.sharpen_amount = 4;
+  EXPECT_THROW(Simulator{o}, InputError);
+}
+
 // --- Depth bias -------------------------------------------------------------------
 
 TEST(DepthBias, ScaleErrorAndFieldShowInTheDepthOfAPlane) {
