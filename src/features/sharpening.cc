@@ -134,7 +134,7 @@ std::string SharpeningEstimationOptions::Validate() const {
              std::any_of(sigmas_px.begin(), sigmas_px.end(), [](double s) { return !(s >= 0.3 && s <= 5); })) {
     out << "sharpening radii must be listed, each within [0.3, 5] px";
   } else if (!(min_cell_px > 0) || !(profile_half_width_px > 0) || !(bin_px > 0) || min_edges < 1 ||
-             max_markers < 1) {
+             max_markers < 1 || !(min_profile_half_width_px > 0 && min_profile_half_width_px <= profile_half_width_px)) {
     out << "sharpening profile settings must be positive";
   }
   return out.str();
@@ -174,6 +174,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   // enough markers' quiet zones hold, within 0.6 of a cell.
   const size_t enough = static_cast<size_t>((options.min_edges + 3) / 4);
   if (candidates.size() >= enough) reach = std::min(reach, 0.6 * candidates[enough - 1].cell_px);
+  if (reach < options.min_profile_half_width_px) candidates.clear();  // halos would not fade inside the profiles
   while (!candidates.empty() && 0.6 * candidates.back().cell_px < reach - 1e-9) candidates.pop_back();
   if (static_cast<int>(candidates.size()) > options.max_markers) candidates.resize(options.max_markers);
 
@@ -255,12 +256,13 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
 
   const Pooled delivered = pool(0, 1);
   out.edges_used = delivered.edges;
+  out.profile_half_width_px = reach;
   const int min_count = 20;
   const ProfileFigures base = Figures(delivered, min_count);
   if (delivered.edges < options.min_edges || !base.valid) {
-    out.message = StringPrintf("camera sharpening not estimated (%d marker edges with cells of at least %.0f px, %d "
-                               "needed); none assumed",
-                               delivered.edges, options.min_cell_px, options.min_edges);
+    out.message = StringPrintf("camera sharpening not estimated (%d marker edges with cells of at least %.1f px, %d "
+                               "needed)",
+                               delivered.edges, options.min_profile_half_width_px / 0.6, options.min_edges);
     return out;
   }
   out.ok = true;
@@ -282,19 +284,27 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
         break;  // more only blurs
       }
     }
-    if (!found) best = base;
+    if (!found) {
+      out.ok = false;
+      out.message = StringPrintf(
+          "camera sharpening not estimated (the edges overshoot by %.1f %% of their contrast, but no amount up to "
+          "%.1f undoes it)",
+          100 * base.overshoot, options.max_amount);
+      return out;
+    }
   }
   out.amount = best_amount;
   out.sigma_px = best_sigma;
   out.overshoot_after = best.overshoot;
   if (best_amount > 0) {
     out.message = StringPrintf(
-        "camera sharpening estimated from %d marker edges: amount %.1f, radius %.1f px (overshoot %.1f %% of the "
-        "edges' contrast as delivered, %.1f %% undone)",
-        delivered.edges, best_amount, best_sigma, 100 * out.overshoot_delivered, 100 * out.overshoot_after);
+        "camera sharpening estimated from %d marker edges (profiles +-%.1f px): amount %.1f, radius %.1f px "
+        "(overshoot %.1f %% of the edges' contrast as delivered, %.1f %% undone)",
+        delivered.edges, reach, best_amount, best_sigma, 100 * out.overshoot_delivered, 100 * out.overshoot_after);
   } else {
-    out.message = StringPrintf("no camera sharpening (overshoot %.1f %% of the edges' contrast over %d marker edges)",
-                               100 * out.overshoot_delivered, delivered.edges);
+    out.message = StringPrintf(
+        "no camera sharpening (overshoot %.1f %% of the edges' contrast over %d marker edges, profiles +-%.1f px)",
+        100 * out.overshoot_delivered, delivered.edges, reach);
   }
   return out;
 }

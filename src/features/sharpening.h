@@ -64,15 +64,19 @@ struct SharpeningEstimationOptions {
   std::vector<double> sigmas_px{1.0};
   /// Profiles reach +-profile_half_width_px across each edge, where the halo
   /// has faded (about 2.5 times the blur and the mask's radius together),
-  /// or 0.6 of a cell when too few markers have cells that wide; markers
-  /// whose cells span fewer than min_cell_px pixels are not used.
+  /// or 0.6 of a cell when too few markers have cells that wide, but not
+  /// less than min_profile_half_width_px (else not estimated: shorter
+  /// profiles hold part of the halo as the edge's own levels, and the amount
+  /// found scattered from 0.4 to 2.5 for a true 1.0 over 60-frame xtion
+  /// walks whose fourth largest marker had cells of 5-7 px).
   double min_cell_px = 5.0;
   double profile_half_width_px = 5.5;
+  double min_profile_half_width_px = 4.5;
   double bin_px = 0.25;
   /// Edges with less contrast (codes) are not used.
   double min_contrast_codes = 20;
   /// Fewer edges: not estimated (amount 0 assumed).
-  int min_edges = 16;
+  int min_edges = 32;
   int max_markers = 60;
   std::string Validate() const;
 };
@@ -82,6 +86,7 @@ struct SharpeningEstimate {
   double amount = 0;
   double sigma_px = 1.0;
   int edges_used = 0;
+  double profile_half_width_px = 0;  ///< the reach the profiles had
   /// Overshoot of the pooled profile (sum of its decreases, fraction of
   /// contrast) as delivered and after undoing the estimate.
   double overshoot_delivered = 0;
