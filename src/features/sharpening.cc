@@ -174,7 +174,15 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   // enough markers' quiet zones hold, within 0.6 of a cell.
   const size_t enough = static_cast<size_t>((options.min_edges + 3) / 4);
   if (candidates.size() >= enough) reach = std::min(reach, 0.6 * candidates[enough - 1].cell_px);
-  if (reach < options.min_profile_half_width_px) candidates.clear();  // halos would not fade inside the profiles
+  const double needed_cell_px = options.min_profile_half_width_px / 0.6;
+  const long wide_enough = std::count_if(candidates.begin(), candidates.end(),
+                                         [&](const Candidate& c) { return c.cell_px >= needed_cell_px - 1e-9; });
+  if (reach < options.min_profile_half_width_px) {  // halos would not fade inside the profiles
+    out.message = StringPrintf("camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, %zu "
+                               "needed)",
+                               wide_enough, needed_cell_px, enough);
+    return out;
+  }
   while (!candidates.empty() && 0.6 * candidates.back().cell_px < reach - 1e-9) candidates.pop_back();
   if (static_cast<int>(candidates.size()) > options.max_markers) candidates.resize(options.max_markers);
 
@@ -260,9 +268,9 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   const int min_count = 20;
   const ProfileFigures base = Figures(delivered, min_count);
   if (delivered.edges < options.min_edges || !base.valid) {
-    out.message = StringPrintf("camera sharpening not estimated (%d marker edges with cells of at least %.1f px, %d "
-                               "needed)",
-                               delivered.edges, options.min_profile_half_width_px / 0.6, options.min_edges);
+    out.message = StringPrintf("camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, "
+                               "%d usable edges of %d needed)",
+                               wide_enough, needed_cell_px, delivered.edges, options.min_edges);
     return out;
   }
   out.ok = true;
