@@ -73,6 +73,19 @@ void PrintStudy(const char* title, const CameraIntrinsics& camera,
   std::fflush(stdout);
 }
 
+double SrgbEncode(double x) { return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055; }
+
+// The camera response (and sharpening) estimated from the images themselves,
+// starting from the sRGB assumption.
+RecordingResponse EstimateFromImages(const std::vector<StudyImage>& images) {
+  MarkerDetectorOptions none;
+  none.refinement = CornerRefinementMethod::kOpenCvNone;
+  MarkerDetector detector(none);
+  std::vector<ResponseFrame> frames;
+  for (const StudyImage& img : images) frames.push_back({img.image, detector.Detect(img.image)});
+  return EstimateResponseFromFrames(frames, MarkerDetectorOptions(), CameraResponse::Srgb());
+}
+
 void RunReport(bool quick) {
   const CameraIntrinsics hd = HdCamera();
   const int n = quick ? 8 : 40;
@@ -130,7 +143,7 @@ void RunReport(bool quick) {
         "grey, blur 1.0 px)\n\n"
         "| camera response | corners from | n | median px | p95 px | scale bias %% | t err median mm | "
         "R err median deg |\n|---|---|---|---|---|---|---|---|\n");
-    auto srgb = [](double x) { return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055; };
+    auto srgb = SrgbEncode;
     const std::pair<const char*, std::function<double(double)>> curves[] = {
         {"linear", [](double x) { return x; }},
         {"sRGB", srgb},
@@ -143,13 +156,7 @@ void RunReport(bool quick) {
       render.encode = encode;
       render.blur_sigma_px = 1.0;
       const auto images = MakeStudyImages(hd, n, 10, 15, 80, 60, render, seed++);
-      MarkerDetectorOptions none;
-      none.refinement = CornerRefinementMethod::kOpenCvNone;
-      MarkerDetector detector(none);
-      std::vector<ResponseFrame> frames;
-      for (const StudyImage& img : images) frames.push_back({img.image, detector.Detect(img.image)});
-      const RecordingResponse estimated =
-          EstimateResponseFromFrames(frames, MarkerDetectorOptions(), CameraResponse::Srgb());
+      const RecordingResponse estimated = EstimateFromImages(images);
       const std::pair<const char*, CameraResponse> uses[] = {
           {"sRGB assumed", CameraResponse::Srgb()},
           {"estimated", estimated.response},
@@ -173,7 +180,7 @@ void RunReport(bool quick) {
         "noise 2 grey, blur 1.0 px; response estimated)\n\n"
         "| processing | n | median px | p95 px | scale bias %% | t err median mm | R err median deg | "
         "response estimate |\n|---|---|---|---|---|---|---|---|\n");
-    auto srgb = [](double x) { return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055; };
+    auto srgb = SrgbEncode;
     struct Processing {
       const char* name;
       double sharpen;
@@ -196,13 +203,7 @@ void RunReport(bool quick) {
       render.sharpen_sigma_px = k.sharpen_sigma;
       render.jpeg_quality = k.jpeg;
       const auto images = MakeStudyImages(hd, n, 10, 15, 80, 60, render, seed++);
-      MarkerDetectorOptions none;
-      none.refinement = CornerRefinementMethod::kOpenCvNone;
-      MarkerDetector detector(none);
-      std::vector<ResponseFrame> frames;
-      for (const StudyImage& img : images) frames.push_back({img.image, detector.Detect(img.image)});
-      const RecordingResponse estimated =
-          EstimateResponseFromFrames(frames, MarkerDetectorOptions(), CameraResponse::Srgb());
+      const RecordingResponse estimated = EstimateFromImages(images);
       MarkerDetectorOptions o;
       o.edge.response = estimated.response;
       const Summary sum = Summarise(RunStudy(images, hd, o), 0, 1e9);
