@@ -73,7 +73,7 @@ class CameraResponse {
   /// The camera's own sharpening after its tone curve (sharpening.h): codes
   /// were delivered as code + amount * (code - Gaussian(code, sigma_px)).
   /// 0 = none. Readers of sub-pixel intensities undo it first
-  /// (UndoSharpeningAround). Throws InputError unless amount is in [0, 5]
+  /// (UndoSharpening). Throws InputError unless amount is in [0, 5]
   /// and sigma in [0.3, 5] px.
   CameraResponse WithSharpening(double amount, double sigma_px) const;
   double sharpen_amount() const { return sharpen_amount_; }

@@ -60,7 +60,6 @@ struct Pooled {
 struct ProfileFigures {
   double overshoot = 0;   // sum of the profile's decreases (fraction of contrast)
   double tolerance = 0;   // what noise alone makes of it
-  double sharpness = 0;   // sum of squared steps
   bool valid = false;
 };
 
@@ -78,7 +77,6 @@ ProfileFigures Figures(const Pooled& p, int min_count) {
   for (size_t i = 0; i + 1 < mean.size(); ++i) {
     const double step = mean[i + 1] - mean[i];
     if (step < 0) f.overshoot -= step;
-    f.sharpness += step * step;
     // What noise alone gives a step of this size: E[max(0, -step)] for a
     // step of zero mean is 0.4 of its sigma, and fades on the rising part.
     const double s = std::hypot(se[i], se[i + 1]);
@@ -130,10 +128,9 @@ std::string SharpeningEstimationOptions::Validate() const {
   std::ostringstream out;
   if (!(amount_step > 0) || !(max_amount >= 0) || max_amount > 5) {
     out << "sharpening amounts must be positive steps up to at most 5";
-  } else if (sigmas_px.empty() ||
-             std::any_of(sigmas_px.begin(), sigmas_px.end(), [](double s) { return !(s >= 0.3 && s <= 5); })) {
-    out << "sharpening radii must be listed, each within [0.3, 5] px";
-  } else if (!(min_cell_px > 0) || !(profile_half_width_px > 0) || !(bin_px > 0) || min_edges < 1 ||
+  } else if (!(sigma_px >= 0.3 && sigma_px <= 5)) {
+    out << "the sharpening radius must be within [0.3, 5] px";
+  } else if (!(profile_half_width_px > 0) || !(bin_px > 0) || min_edges < 1 ||
              max_markers < 1 || !(min_profile_half_width_px > 0 && min_profile_half_width_px <= profile_half_width_px)) {
     out << "sharpening profile settings must be positive";
   }
@@ -148,8 +145,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   ARPOS_CHECK(grays.size() == markers.size(), "one marker list per image");
   SharpeningEstimate out;
   double reach = options.profile_half_width_px;
-  const double max_sigma = *std::max_element(options.sigmas_px.begin(), options.sigmas_px.end());
-  const int margin = static_cast<int>(std::ceil(4 * max_sigma)) + 2;
+  const int margin = static_cast<int>(std::ceil(4 * options.sigma_px)) + 2;
 
   // The edges' pixels, once (largest cells first, at most max_markers).
   struct Candidate {
@@ -165,7 +161,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
       double shortest = 1e9;
       for (int k = 0; k < 4; ++k) shortest = std::min(shortest, (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm());
       const double cell = shortest / cells_per_side;
-      if (cell >= options.min_cell_px) candidates.push_back({f, &m, cell});
+      if (cell > 0) candidates.push_back({f, &m, cell});
     }
   }
   std::sort(candidates.begin(), candidates.end(),
@@ -177,7 +173,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   const double needed_cell_px = options.min_profile_half_width_px / 0.6;
   const long wide_enough = std::count_if(candidates.begin(), candidates.end(),
                                          [&](const Candidate& c) { return c.cell_px >= needed_cell_px - 1e-9; });
-  if (reach < options.min_profile_half_width_px) {  // halos would not fade inside the profiles
+  if (candidates.size() < enough || reach < options.min_profile_half_width_px) {  // halos would not fade inside
     out.message = StringPrintf("camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, %zu "
                                "needed)",
                                wide_enough, needed_cell_px, enough);
@@ -221,7 +217,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   }
 
   const int bins = static_cast<int>(std::ceil(2 * reach / options.bin_px));
-  auto pool = [&](double amount, double sigma) {
+  auto pool = [&](double amount) {
     Pooled p;
     p.sum.assign(bins, 0);
     p.sum2.assign(bins, 0);
@@ -229,14 +225,14 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
     for (const MarkerPatch& patch : patches) {
       cv::Mat e;
       if (amount > 0) {
-        e = UndoInside(*patch.gray, patch.outer, amount, sigma);
+        e = UndoInside(*patch.gray, patch.outer, amount, options.sigma_px);
       } else {
         (*patch.gray)(patch.outer).convertTo(e, CV_32F);
       }
       if (!e.isContinuous()) e = e.clone();
       const float* v = e.ptr<float>(0);
       for (const EdgeSamples& edge : patch.edges) {
-        // The edge's own black and white: the outer half-pixel of each side.
+        // The edge's own black and white: the outer pixel of each side.
         double black = 0, white = 0;
         int nb = 0, nw = 0;
         for (size_t i = 0; i < edge.index.size(); ++i) {
@@ -262,7 +258,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
     return p;
   };
 
-  const Pooled delivered = pool(0, 1);
+  const Pooled delivered = pool(0);
   out.edges_used = delivered.edges;
   out.profile_half_width_px = reach;
   const int min_count = 20;
@@ -275,24 +271,18 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   }
   out.ok = true;
   out.overshoot_delivered = base.overshoot;
-  double best_amount = 0, best_sigma = 1.0;
-  ProfileFigures best = base;
+  out.overshoot_after = base.overshoot;
   if (base.overshoot > 2 * base.tolerance) {
-    // Per radius, the least amount whose undone profile is monotone within
-    // its noise (more only blurs); of the radii, the sharpest.
-    bool found = false;
-    for (double sigma : options.sigmas_px) {
-      for (double amount = options.amount_step; amount <= options.max_amount + 1e-9; amount += options.amount_step) {
-        const ProfileFigures f = Figures(pool(amount, sigma), min_count);
-        if (!f.valid || f.overshoot > f.tolerance) continue;
-        if (!found || f.sharpness > best.sharpness) {
-          best = f, best_amount = amount, best_sigma = sigma;
-          found = true;
-        }
-        break;  // more only blurs
-      }
+    // The least amount whose undone profile is monotone within its noise
+    // (more only blurs).
+    for (double amount = options.amount_step; amount <= options.max_amount + 1e-9; amount += options.amount_step) {
+      const ProfileFigures f = Figures(pool(amount), min_count);
+      if (!f.valid || f.overshoot > f.tolerance) continue;
+      out.amount = amount;
+      out.overshoot_after = f.overshoot;
+      break;
     }
-    if (!found) {
+    if (out.amount == 0) {
       out.ok = false;
       out.message = StringPrintf(
           "camera sharpening not estimated (the edges overshoot by %.1f %% of their contrast, but no amount up to "
@@ -301,14 +291,12 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
       return out;
     }
   }
-  out.amount = best_amount;
-  out.sigma_px = best_sigma;
-  out.overshoot_after = best.overshoot;
-  if (best_amount > 0) {
+  out.sigma_px = options.sigma_px;
+  if (out.amount > 0) {
     out.message = StringPrintf(
         "camera sharpening estimated from %d marker edges (profiles +-%.1f px): amount %.1f, radius %.1f px "
         "(overshoot %.1f %% of the edges' contrast as delivered, %.1f %% undone)",
-        delivered.edges, reach, best_amount, best_sigma, 100 * out.overshoot_delivered, 100 * out.overshoot_after);
+        delivered.edges, reach, out.amount, out.sigma_px, 100 * out.overshoot_delivered, 100 * out.overshoot_after);
   } else {
     out.message = StringPrintf(
         "no camera sharpening (overshoot %.1f %% of the edges' contrast over %d marker edges, profiles +-%.1f px)",

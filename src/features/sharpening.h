@@ -54,14 +54,15 @@ cv::Rect MarkerReadRegion(const std::array<Eigen::Vector2d, 4>& corners_px, int 
                           const cv::Size& image_size);
 
 struct SharpeningEstimationOptions {
-  /// Candidates: amounts 0, step, 2 step, ... max_amount; the radii listed.
-  /// The radius is poorly told by the profile (a wider mask undone by a
-  /// smaller amount leaves it as monotone, and sharper), so one is assumed:
-  /// features_bench, a camera's 0.7 px mask undone as a 1 px one, corners
-  /// 0.047 -> 0.026 px median (0.020 unsharpened).
+  /// Candidates: amounts step, 2 step, ... max_amount, of a mask of radius
+  /// sigma_px. The radius is poorly told by the profile (a wider mask undone
+  /// by a smaller amount leaves it as monotone, and sharper: a search over
+  /// radii picked the widest), so one is assumed: features_bench, a camera's
+  /// 0.7 px mask undone as a 1 px one, corners 0.047 -> 0.026 px median
+  /// (0.020 unsharpened).
   double amount_step = 0.1;
   double max_amount = 2.5;
-  std::vector<double> sigmas_px{1.0};
+  double sigma_px = 1.0;
   /// Profiles reach +-profile_half_width_px across each edge, where the halo
   /// has faded (about 2.5 times the blur and the mask's radius together),
   /// or 0.6 of a cell when too few markers have cells that wide, but not
@@ -69,13 +70,13 @@ struct SharpeningEstimationOptions {
   /// profiles hold part of the halo as the edge's own levels, and the amount
   /// found scattered from 0.4 to 2.5 for a true 1.0 over 60-frame xtion
   /// walks whose fourth largest marker had cells of 5-7 px).
-  double min_cell_px = 5.0;
   double profile_half_width_px = 5.5;
   double min_profile_half_width_px = 4.5;
   double bin_px = 0.25;
   /// Edges with less contrast (codes) are not used.
   double min_contrast_codes = 20;
-  /// Fewer edges: not estimated (amount 0 assumed).
+  /// Fewer edges (min_edges / 4 marker views set the reach): not
+  /// estimated, and the caller keeps what it had (the fallback response's).
   int min_edges = 32;
   int max_markers = 60;
   std::string Validate() const;
