@@ -118,7 +118,8 @@ CameraResponse CameraResponse::Parse(const std::string& text, const std::string&
   }
   std::string extra;
   double amount = 0, sigma = 1;
-  if (in >> extra) {
+  const bool sharpening = static_cast<bool>(in >> extra);
+  if (sharpening) {
     if (extra != "sharpen" || !(in >> amount >> sigma)) {
       ARPOS_INPUT_ERROR(what << ": camera response has more than 256 values (or a malformed 'sharpen AMOUNT "
                                 "SIGMA' after them)");
@@ -127,7 +128,7 @@ CameraResponse CameraResponse::Parse(const std::string& text, const std::string&
   }
   try {
     CameraResponse r = FromTable(table, text.substr(0, colon));
-    return amount > 0 ? r.WithSharpening(amount, sigma) : r;
+    return sharpening ? r.WithSharpening(amount, sigma) : r;  // checks the stored values
   } catch (const InputError& e) {
     ARPOS_INPUT_ERROR(what << ": " << e.what());
   }

@@ -192,6 +192,7 @@ TEST(CameraResponse, SharpeningIsStoredWithTheCurve) {
   EXPECT_THROW(CameraResponse::Parse(table + " sharpen 0.5", "plan 4"), InputError);
   EXPECT_THROW(CameraResponse::Parse(table + " sharpen 0.5 1 7", "plan 4"), InputError);
   EXPECT_THROW(CameraResponse::Parse(table + " sharpen 9 1", "plan 4"), InputError);
+  EXPECT_THROW(CameraResponse::Parse(table + " sharpen -0.5 1", "plan 4"), InputError);
   EXPECT_THROW(CameraResponse::Parse(table + " blur 0.5 1", "plan 4"), InputError);
   EXPECT_THROW(CameraResponse::Srgb().WithSharpening(-0.1, 1), InputError);
   EXPECT_THROW(CameraResponse::Srgb().WithSharpening(1, 0.1), InputError);
