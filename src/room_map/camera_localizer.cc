@@ -89,6 +89,9 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (min_depth_held_samples < 1 || !(max_depth_held_position_sigma_m > 0) || max_depth_held_frames < 1) {
     out << "depth-held tracking needs at least one sample and frame and a positive sigma";
   }
+  else if (!(max_followed_s > 0) || !(follow_min_depth_m > 0) || !(follow_max_depth_m > follow_min_depth_m) ||
+           !(anchor_keep_s >= 0) || !(anchor_keep_ratio >= 1))
+    out << "following the room needs a positive time, a depth range (min < max) and an anchor ratio of at least 1";
   else if (!(motion_prior_sigma_m > 0) || !(motion_prior_sigma_deg > 0)) out << "motion prior sigmas must be positive";
   else if (max_frames_lost_before_relocalising < 0) out << "max_frames_lost_before_relocalising must not be negative";
   else if (min_marker_corners < 4 || min_keypoints < 6 || min_keypoints_tracking < 6)
@@ -152,6 +155,25 @@ struct CameraLocalizer::Impl {
   double last_t = 0, prev_t = 0;
   // A caller's start for the next relocalisation (SuggestSearchStart).
   std::optional<Rigid3d> search_start;
+  // What moves in the room (SetMovingRegions); unset: frames are not followed.
+  std::optional<std::vector<ExclusionBox>> moving;
+  // The last frame placed by the map (or followed from it, when it became
+  // the anchor): its keypoints with depth in the room, for following the
+  // room from it (options.follow_room_keypoints).
+  struct Anchor {
+    bool valid = false;
+    std::vector<Eigen::Vector3d> points;
+    cv::Mat descriptors;
+    Rigid3d camera_from_room;
+    Mat6 cov = Mat6::Zero();
+    double t = 0;
+    double since_map_t = 0;  // when the map placed the frame this anchor descends from
+    double position_sigma_mm = 0;  // largest axis of cov's position block
+  } anchor;
+  // The landmarks matched by projection: the map's, or the anchor's while following.
+  const std::vector<Eigen::Vector3d>* landmarks = nullptr;
+  const cv::Mat* landmark_descriptors = nullptr;
+  Mat6 followed_cov = Mat6::Zero();  // the last followed frame's covariance
 
   // The map's planes: markers lying in one plane (room frame).
   std::vector<MarkerPlane> planes;
@@ -164,6 +186,8 @@ struct CameraLocalizer::Impl {
 
   Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
       : map(m), K(k), options(o), extractor(o.keypoints) {
+    landmarks = &map.landmarks_in_room;
+    landmark_descriptors = &map.landmark_descriptors;
     distortion = K.HasDistortion();
     lens = PixelUndistorter(K);
     MarkerDetectorOptions d = options.detector;
@@ -384,12 +408,13 @@ struct CameraLocalizer::Impl {
     const int n_kp = static_cast<int>(keypoints.size());
     match_of_keypoint.assign(n_kp, -1);
     match_distance.assign(n_kp, 257);
-    if (n_kp == 0 || map.landmarks_in_room.empty()) return 0;
+    if (n_kp == 0 || landmarks->empty()) return 0;
     const Eigen::Matrix3d R = camera_from_room.RotationMatrix();
     const Eigen::Vector3d t = camera_from_room.translation;
     const int border = options.keypoints.border_px - 2;
-    for (int l = 0; l < map.num_landmarks(); ++l) {
-      const Eigen::Vector3d p = R * map.landmarks_in_room[l] + t;
+    const int n_landmarks = static_cast<int>(landmarks->size());
+    for (int l = 0; l < n_landmarks; ++l) {
+      const Eigen::Vector3d p = R * (*landmarks)[l] + t;
       if (p.z() < 0.1) continue;
       double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
       if (distortion) {
@@ -400,7 +425,7 @@ struct CameraLocalizer::Impl {
         v = image.y();
       }
       if (u < border || v < border || u >= K.width - border || v >= K.height - border) continue;
-      const std::uint8_t* d = map.landmark_descriptors.ptr<std::uint8_t>(l);
+      const std::uint8_t* d = landmark_descriptors->ptr<std::uint8_t>(l);
       const double max_dz = std::max(0.05, 5 * DepthSigma(p.z()));
       NearestTwo nearest;
       grid.ForEachInRadius(u, v, radius_px, [&](int i) {
@@ -493,7 +518,7 @@ struct CameraLocalizer::Impl {
       if (l < 0) continue;
       const float z = keypoints.depth_m[i];
       const bool depth = options.use_keypoint_depth && z > 0;
-      corr.Add(map.landmarks_in_room[l], keypoint_px[i], keypoint_sigma, CorrespondenceGroup::kKeypoint,
+      corr.Add((*landmarks)[l], keypoint_px[i], keypoint_sigma, CorrespondenceGroup::kKeypoint,
                static_cast<int>(i), depth ? z : 0.0, depth ? DepthSigma(z) : 0.0);
     }
   }
@@ -591,7 +616,7 @@ struct CameraLocalizer::Impl {
     BuildCorrespondences();
     PoseRefinementResult r = RefineCameraPose(corr, K, initial, options.refiner, prior);
     Lap(mark, refinement_ms);
-    const bool keypoints = options.use_keypoints && !map.landmarks_in_room.empty();
+    const bool keypoints = options.use_keypoints && !landmarks->empty();
     if (keypoints || !planes.empty() || !surface.empty()) {
       if (keypoints) SearchByProjection(r.camera_from_room, options.refined_search_radius_px);
       Lap(mark, matching_ms);
@@ -683,6 +708,97 @@ struct CameraLocalizer::Impl {
     out->held_by_depth = true;
     return true;
   }
+
+  // This frame's keypoints with depth, outside the moving regions, put in
+  // the room by `camera_from_room` (covariance `cov` of its left
+  // perturbation [rotation; translation]): the anchor the next frames the
+  // map does not place are followed from.
+  void SetAnchor(const Rigid3d& camera_from_room, const Mat6& cov, double t, double since_map_t) {
+    anchor.valid = false;
+    if (!moving || !options.follow_room_keypoints || keypoints.size() == 0) return;
+    const Rigid3d room_from_camera = camera_from_room.Inverse();
+    anchor.points.clear();
+    anchor.descriptors.create(0, kDescriptorBytes, CV_8UC1);
+    std::vector<int> rows;
+    for (size_t i = 0; i < keypoints.size(); ++i) {
+      const double z = keypoints.depth_m[i];
+      if (!(z >= options.follow_min_depth_m && z <= options.follow_max_depth_m)) continue;
+      const Eigen::Vector3d xc((keypoint_px[i].x() - K.cx) / K.fx * z, (keypoint_px[i].y() - K.cy) / K.fy * z, z);
+      const Eigen::Vector3d x = room_from_camera * xc;
+      bool inside = false;
+      for (const ExclusionBox& box : *moving) inside |= box.Contains(x);
+      if (inside) continue;
+      anchor.points.push_back(x);
+      rows.push_back(static_cast<int>(i));
+    }
+    anchor.descriptors.create(static_cast<int>(rows.size()), kDescriptorBytes, CV_8UC1);
+    for (size_t r = 0; r < rows.size(); ++r) keypoints.descriptors.row(rows[r]).copyTo(anchor.descriptors.row(static_cast<int>(r)));
+    anchor.camera_from_room = camera_from_room;
+    anchor.cov = cov;
+    anchor.position_sigma_mm =
+        1000 * std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov.bottomRightCorner<3, 3>())
+                                           .eigenvalues()
+                                           .maxCoeff()));
+    anchor.t = t;
+    anchor.since_map_t = since_map_t;
+    anchor.valid = static_cast<int>(anchor.points.size()) >= options.min_keypoints_tracking;
+  }
+
+  // A frame the map does not place, followed from the anchor: matched by
+  // projection from `predicted` against the anchor's points, refined with
+  // the room's depth. True with *r and *out filled when accepted; the
+  // covariance (the frame's own against the anchor plus the anchor's own,
+  // carried to this camera) in followed_cov.
+  bool Follow(const Rigid3d& predicted, const std::optional<PosePrior>& prior, double t, PoseRefinementResult* r,
+              LocalizationResult* out, LocalizationTimings* tm, double* mark) {
+    if (!anchor.valid || !options.use_keypoints || !(t - anchor.since_map_t <= options.max_followed_s)) return false;
+    landmarks = &anchor.points;
+    landmark_descriptors = &anchor.descriptors;
+    *r = Track(predicted, options.search_radius_px, prior, &tm->matching_ms, &tm->refinement_ms, mark);
+    landmarks = &map.landmarks_in_room;
+    landmark_descriptors = &map.landmark_descriptors;
+    if (!r->converged || r->keypoint_inliers < options.min_keypoints_tracking ||
+        !(r->keypoint_rms_px <= options.max_keypoint_rms_px)) {
+      return false;
+    }
+    // The frame's own information against the anchor's points, without the
+    // motion prior (which descends from the anchor too).
+    const PoseRefinementResult alone = RefineCameraPose(corr, K, r->camera_from_room, options.refiner);
+    Lap(mark, &tm->refinement_ms);
+    const Eigen::LDLT<Mat6> ldlt(alone.information);
+    if (!alone.converged || ldlt.info() != Eigen::Success || !(alone.information.diagonal().array() > 0).all()) {
+      return false;
+    }
+    // An error exp(d) of the anchor's camera_from_room moves its points, and
+    // so this camera, by exp(Ad_M d), M = camera_from_room * anchor^-1.
+    const Rigid3d M = r->camera_from_room * anchor.camera_from_room.Inverse();
+    const Eigen::Matrix3d R = M.RotationMatrix();
+    Eigen::Matrix3d tx;
+    tx << 0, -M.translation.z(), M.translation.y(), M.translation.z(), 0, -M.translation.x(), -M.translation.y(),
+        M.translation.x(), 0;
+    Mat6 Ad = Mat6::Zero();
+    Ad.topLeftCorner<3, 3>() = R;
+    Ad.bottomLeftCorner<3, 3>() = tx * R;
+    Ad.bottomRightCorner<3, 3>() = R;
+    const Mat6 cov = ldlt.solve(Mat6::Identity()) + Ad * anchor.cov * Ad.transpose();
+    if (!cov.allFinite()) return false;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pos(cov.bottomRightCorner<3, 3>());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rot(cov.topLeftCorner<3, 3>());
+    out->markers_used = 0;
+    out->keypoints_used = r->keypoint_inliers;
+    out->plane_depth_samples = plane_samples_used;
+    out->surface_depth_samples = surface_samples_used;
+    out->rms_px = r->rms_px;
+    out->marker_rms_px = r->marker_rms_px;
+    out->keypoint_rms_px = r->keypoint_rms_px;
+    out->position_sigma_mm = 1000 * std::sqrt(std::max(0.0, pos.eigenvalues().maxCoeff()));
+    out->rotation_sigma_deg = DegFromRad(std::sqrt(std::max(0.0, rot.eigenvalues().maxCoeff())));
+    if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
+    out->followed = true;
+    out->followed_s = t - anchor.since_map_t;
+    followed_cov = cov;
+    return true;
+  }
 };
 
 CameraLocalizer::CameraLocalizer(RoomMap map, const CameraIntrinsics& intrinsics,
@@ -707,7 +823,10 @@ void CameraLocalizer::Reset() {
   impl_->depth_held_run = 0;
   impl_->unconfirmed = false;
   impl_->search_start.reset();
+  impl_->anchor.valid = false;
 }
+
+void CameraLocalizer::SetMovingRegions(std::vector<ExclusionBox> regions) { impl_->moving = std::move(regions); }
 
 void CameraLocalizer::SuggestSearchStart(const Rigid3d& room_from_camera) {
   impl_->search_start = room_from_camera.Inverse();
@@ -801,8 +920,8 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   std::optional<PoseRefinementResult> held;
   LocalizationResult held_out;
   std::string not_held;  // why the room's depth did not hold it, if that was tried
+  std::optional<PosePrior> prior;
   if (predicted) {
-    std::optional<PosePrior> prior;
     const std::optional<Impl::Mat6> filter_information = m.PredictedInformation(frame.timestamp_s);
     if (options_.use_motion_prior) {
       const double scale = std::max(1.0, std::abs(frame.timestamp_s - m.last_t) * 30.0);
@@ -891,6 +1010,17 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       ok = m.Accept(refined, false, &out);
       if (ok) out.status = LocalizationStatus::kRelocalized;
     }
+    if (!ok && predicted && options_.follow_room_keypoints) {
+      LocalizationResult followed_out;
+      PoseRefinementResult followed;
+      if (m.Follow(*predicted, prior, frame.timestamp_s, &followed, &followed_out, &tm, &mark)) {
+        refined = followed;
+        followed_out.timings = out.timings;
+        out = followed_out;
+        out.status = LocalizationStatus::kTracked;
+        ok = true;
+      }
+    }
     if (!ok && held) {
       refined = *held;
       held_out.timings = out.timings;
@@ -928,10 +1058,30 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     m.last_camera_from_room = refined.camera_from_room;
     m.last_t = frame.timestamp_s;
     m.have_last = true;
-    {
+    if (out.followed) {
+      m.have_cov = true;
+      m.last_cov = m.followed_cov;
+      // Far from the anchor (few of its points still matched): this frame
+      // becomes the anchor, its uncertainty carried on.
+      if (out.keypoints_used < 2 * options_.min_keypoints_tracking) {
+        m.SetAnchor(refined.camera_from_room, m.followed_cov, frame.timestamp_s, m.anchor.since_map_t);
+      }
+    } else {
       const Eigen::LDLT<Impl::Mat6> ldlt(refined.information);
-      m.have_cov = ldlt.info() == Eigen::Success && out.status == LocalizationStatus::kTracked;
+      const bool invertible = ldlt.info() == Eigen::Success;
+      m.have_cov = invertible && out.status == LocalizationStatus::kTracked;
       if (m.have_cov) m.last_cov = ldlt.solve(Impl::Mat6::Identity());
+      if (invertible && !out.held_by_depth) {
+        // A frame the map places weakly (a few of its landmarks at the edge
+        // of what the room recording covered) does not replace a recent
+        // anchor it places much worse than: what follows would inherit it
+        // (measured on a random-conditions case: an anchor at 10 mm taking
+        // over from one at 2.8 mm 0.1 s older).
+        const Impl::Mat6 cov = ldlt.solve(Impl::Mat6::Identity());
+        const bool keep = m.anchor.valid && frame.timestamp_s - m.anchor.t <= options_.anchor_keep_s &&
+                          out.position_sigma_mm > options_.anchor_keep_ratio * m.anchor.position_sigma_mm;
+        if (cov.allFinite() && !keep) m.SetAnchor(refined.camera_from_room, cov, frame.timestamp_s, frame.timestamp_s);
+      }
     }
     if (out.markers_used > 0) {
       m.unconfirmed = false;

@@ -20,7 +20,11 @@
 ///     Gauss-Newton with Huber/Tukey losses and a weak motion prior
 ///     (pose_refiner.h); a second matching pass at the refined pose;
 ///  6. acceptance: enough inliers (a fully seen marker, or min_keypoints), RMS
-///     within bounds; otherwise the frame is lost: no pose is reported and
+///     within bounds;
+///  7. while tracking, a frame the map does not place is followed from the
+///     last frame it did (that frame's keypoints with depth, outside the
+///     regions that move), its uncertainty carried on; or held by the
+///     room's depth. Otherwise the frame is lost: no pose is reported and
 ///     nothing is guessed.
 ///
 /// Frames: room = origin marker frame (DATASET.md); camera = OpenCV. Metres,
@@ -226,6 +230,27 @@ struct CameraLocalizerOptions {
   int min_depth_held_samples = 150;
   double max_depth_held_position_sigma_m = 0.005;
   int max_depth_held_frames = 30;
+  /// While tracking, a frame the map does not place (no room marker, the
+  /// map's landmarks not in view: a part of the room the room recording
+  /// did not cover) is followed from the last frame the map did place (the
+  /// anchor): that frame's keypoints with depth, put in the room by its
+  /// pose, outside the moving regions (SetMovingRegions: the couch and the
+  /// patient), are matched by projection and the pose refined on them and
+  /// the room's depth. Its uncertainty is the anchor's carried to this
+  /// camera plus the frame's own against the anchor; at most
+  /// `max_followed_s` after the anchor, at least min_keypoints_tracking
+  /// inliers, and within max_position_sigma_m. When the inliers fall below
+  /// twice that, the followed frame becomes the next anchor (its
+  /// uncertainty, which grows, carried on).
+  bool follow_room_keypoints = true;
+  double max_followed_s = 4.0;
+  double follow_min_depth_m = 0.3;
+  double follow_max_depth_m = 4.0;
+  /// A frame the map places stays out of the anchor's place while the
+  /// anchor is at most `anchor_keep_s` old and the frame's position sigma is
+  /// above `anchor_keep_ratio` times the anchor's.
+  double anchor_keep_s = 1.0;
+  double anchor_keep_ratio = 1.5;
 
   std::string Validate() const;
   bool Check(std::string* reason = nullptr) const;
@@ -274,6 +299,11 @@ struct LocalizationResult {
   /// Tracked on the room's depth and the motion filter alone (no marker,
   /// too few keypoints): options.depth_held_tracking.
   bool held_by_depth = false;
+  /// Followed from the last frame the map placed by the room's keypoints
+  /// (options.follow_room_keypoints), `followed_s` after it; the pose's
+  /// sigmas include that frame's.
+  bool followed = false;
+  double followed_s = 0;
   /// The pose descends from a relocalisation by keypoints alone (at the
   /// start or after a loss), and no room marker has been used since: keypoints can
   /// agree on a wrong place (a repeating floor pattern: measured 0.75 m off
@@ -328,6 +358,12 @@ class CameraLocalizer {
   /// only: the pose found must pass the same acceptance, and the last pose
   /// this localiser found stays its reference. Used by one frame.
   void SuggestSearchStart(const Rigid3d& room_from_camera);
+  /// Regions of the room that move (the couch top and the patient, e.g.
+  /// CouchExclusionBox at the planned and at the last known pose): the
+  /// room is not followed by keypoints inside them. Until this is called
+  /// frames are not followed (options.follow_room_keypoints): only a caller
+  /// that knows what moves in the room turns it on.
+  void SetMovingRegions(std::vector<ExclusionBox> regions);
 
   const RoomMap& map() const { return map_; }
   const CameraLocalizerOptions& options() const { return options_; }

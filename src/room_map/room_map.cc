@@ -169,4 +169,14 @@ RoomMap FromRecord(const RoomMapRecord& record) {
   return map;
 }
 
+ExclusionBox CouchExclusionBox(const Rigid3d& room_from_model_target, double half_width_m,
+                               double anterior_m, double posterior_m, double half_length_m) {
+  ExclusionBox box;
+  // Model frame (LPS): y posterior. The box spans y in [-anterior, +posterior].
+  const Eigen::Vector3d centre_in_model(0, 0.5 * (posterior_m - anterior_m), 0);
+  box.room_from_box = room_from_model_target * Rigid3d(Eigen::Quaterniond::Identity(), centre_in_model);
+  box.half_extent_m = Eigen::Vector3d(half_width_m, 0.5 * (posterior_m + anterior_m), half_length_m);
+  return box;
+}
+
 }  // namespace arpos

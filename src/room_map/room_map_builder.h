@@ -43,25 +43,6 @@
 
 namespace arpos {
 
-/// An oriented box in the room; landmarks inside it are left out of the map.
-struct ExclusionBox {
-  Rigid3d room_from_box;
-  Eigen::Vector3d half_extent_m = Eigen::Vector3d::Zero();
-  bool Contains(const Eigen::Vector3d& point_in_room) const {
-    const Eigen::Vector3d p = room_from_box.Inverse() * point_in_room;
-    return (p.cwiseAbs() - half_extent_m).maxCoeff() <= 0;
-  }
-};
-
-/// The couch top and everything on it move during positioning: a box about
-/// the treatment isocentre, in the reference-model frame at its target pose
-/// (patient axes as DICOM LPS: x left, y posterior, z superior). Defaults:
-/// 0.45 m either side, from 0.6 m anterior to 0.3 m posterior (below the
-/// couch top), 1.4 m head- and footwards.
-ExclusionBox CouchExclusionBox(const Rigid3d& room_from_model_target,
-                               double half_width_m = 0.45, double anterior_m = 0.6,
-                               double posterior_m = 0.3, double half_length_m = 1.4);
-
 struct RoomMapBuildOptions {
   /// Room-marker detection; dictionary and id range are taken from the case
   /// by MakeRoomMapBuildOptions.

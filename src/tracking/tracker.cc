@@ -56,6 +56,9 @@ Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> 
       }()) {
   expected_room_from_model_ = room_from_model_expected;
   camera_ = std::make_unique<CameraLocalizer>(std::move(map), intrinsics, options_.camera);
+  // The couch top and the patient move: the room is not followed by
+  // keypoints there (CameraLocalizerOptions::follow_room_keypoints).
+  camera_->SetMovingRegions({CouchExclusionBox(target_)});
   body_ = std::make_unique<BodyTracker>(model, std::move(model_from_marker), intrinsics, options_.body);
 }
 
@@ -128,6 +131,9 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     depth_note = "no depth";
   }
 
+  if (last_room_from_model_) {
+    camera_->SetMovingRegions({CouchExclusionBox(target_), CouchExclusionBox(*last_room_from_model_)});
+  }
   auto run_camera = [&] {
     const auto t0 = Clock::now();
     LocalizationResult r;
@@ -274,6 +280,17 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       if (out.correction.state == CorrectionState::kIn) out.correction.state = CorrectionState::kOut;
       out.message += std::string(out.message.empty() ? "" : "; ") +
                      "camera placed by keypoints alone (at the start or after a loss), not yet confirmed by a room marker";
+    }
+    if (out.camera.followed) {
+      // Followed by the room's keypoints from the last frame the map placed:
+      // its bound includes that frame's uncertainty, but what the map does
+      // not see is not checked against it; never `in` until the map places
+      // the camera again.
+      if (out.correction.state == CorrectionState::kIn) out.correction.state = CorrectionState::kOut;
+      out.message += std::string(out.message.empty() ? "" : "; ") +
+                     StringPrintf("camera followed by the room's keypoints for %.1f s since the room map last placed "
+                                  "it (no room marker or mapped landmark in view); not `in` until the map places it",
+                                  out.camera.followed_s);
     }
     if (out.camera.held_by_depth) {
       out.message += std::string(out.message.empty() ? "" : "; ") +

@@ -296,6 +296,83 @@ TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
   EXPECT_LE(short_runs.longest_held, 2);
 }
 
+// The small case's map with its landmarks gone and one room marker left
+// (the one the first tracking frame sees best): the frames that do not see
+// that marker are where the room recording left the map blind. With the
+// moving regions set, they are followed by the room's keypoints from the
+// last frame the marker placed, within their stated uncertainty; without,
+// or with everything in view inside a moving region, they are not.
+TEST(Localizer, FramesTheMapDoesNotPlaceAreFollowedFromTheLastItDid) {
+  const auto& c = GetSmallCase();
+  RoomMap map = HundredLandmarkMap();
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  {
+    CameraLocalizer first(map, c.folder.config.camera, MakeCameraLocalizerOptions(c.folder.config));
+    const LocalizationResult r = first.Localize(seq.LoadFrame(0, c.folder.config.camera));
+    ASSERT_TRUE(r.ok);
+    int keep = -1;
+    double side = 0;
+    for (const auto& o : r.markers) {
+      if (o.status == MarkerStatus::kRefined && o.MeanSidePx() > side && map.FindMarker(o.id)) {
+        keep = o.id;
+        side = o.MeanSidePx();
+      }
+    }
+    ASSERT_GE(keep, 0);
+    map.markers.erase(std::remove_if(map.markers.begin(), map.markers.end(),
+                                     [keep](const RoomMapMarkerEntry& m) { return m.id != keep; }),
+                      map.markers.end());
+    map.landmarks_in_room.clear();
+    map.landmark_descriptors = cv::Mat();
+  }
+  struct Run {
+    int ok = 0, followed = 0, beyond_bound = 0;
+    double followed_error_mm = 0, worst_ratio = 0, longest_s = 0;
+  };
+  auto localise = [&](std::optional<std::vector<ExclusionBox>> moving) {
+    CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+    options.depth_held_tracking = false;
+    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    if (moving) localizer.SetMovingRegions(*moving);
+    Run run;
+    for (size_t i = 0; i < seq.size(); ++i) {
+      const LocalizationResult r = localizer.Localize(seq.LoadFrame(i, c.folder.config.camera));
+      if (!r.ok) continue;
+      ++run.ok;
+      if (!r.followed) continue;
+      EXPECT_EQ(r.markers_used, 0) << "frame " << i;
+      EXPECT_GE(r.keypoints_used, options.min_keypoints_tracking) << "frame " << i;
+      EXPECT_GT(r.followed_s, 0) << "frame " << i;
+      EXPECT_LE(r.followed_s, options.max_followed_s) << "frame " << i;
+      const double error_mm = ComputePoseError(gt[i].room_from_x, r.room_from_camera).translation_mm;
+      ++run.followed;
+      run.followed_error_mm += error_mm;
+      run.worst_ratio = std::max(run.worst_ratio, error_mm / r.position_sigma_mm);
+      run.beyond_bound += error_mm > 3 * r.position_sigma_mm;
+      run.longest_s = std::max(run.longest_s, r.followed_s);
+    }
+    if (run.followed) run.followed_error_mm /= run.followed;
+    return run;
+  };
+  ExclusionBox everything;
+  everything.half_extent_m = Eigen::Vector3d(100, 100, 100);
+  const Run off = localise(std::nullopt), on = localise(std::vector<ExclusionBox>{}),
+            all_moving = localise(std::vector<ExclusionBox>{everything});
+  std::printf("one room marker, no landmarks: %d of %zu frames placed; following the room's keypoints %d (%d followed, "
+              "camera %.2f mm off on them, worst %.1f sigma, %d beyond 3 sigma, up to %.2f s after the marker); "
+              "the whole room moving: %d\n",
+              off.ok, seq.size(), on.ok, on.followed, on.followed_error_mm, on.worst_ratio, on.beyond_bound,
+              on.longest_s, all_moving.ok);
+  EXPECT_EQ(off.followed, 0) << "no moving regions given: nothing is followed";
+  EXPECT_EQ(all_moving.followed, 0) << "every point in a moving region: nothing to follow";
+  EXPECT_EQ(all_moving.ok, off.ok);
+  ASSERT_GT(on.followed, 0) << "the sequence should have frames without the marker next to frames with it";
+  EXPECT_EQ(on.ok, off.ok + on.followed);
+  EXPECT_LE(on.beyond_bound, on.followed / 20);
+}
+
 // Keypoints alone can agree on a wrong place (a repeating floor pattern);
 // a pose that descends from a keypoint-only relocalisation (at the start or
 // after a loss) stays unconfirmed until a room marker is used, and the
