@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <random>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -30,7 +31,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct Frame {
-  std::string kind;  // normal, no_stickers, no_room, corrupt, no_depth, gap, empty
+  std::string kind;  // normal, no_stickers, no_room, odd_room, odd_room_no_markers, corrupt, no_depth, gap, empty
 };
 
 class TrackingStage : public ::testing::Test {
@@ -114,6 +115,65 @@ class TrackingStage : public ::testing::Test {
       }
       EXPECT_GT(kept, 5000) << "the patient should fill part of the sample's first frame";
     }
+    // A room the plan never saw: every pixel off the patient (as above)
+    // painted with blocks of random grey the room recording never held, its
+    // depth kept; with the room markers kept (the map places the camera by
+    // them) or painted over too (nothing of the map in view).
+    cv::Mat odd_room = a.color.clone(), odd_room_no_markers;
+    {
+      Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e9), hi = -lo;
+      for (const auto& v : inputs.model.vertices) {
+        lo = lo.cwiseMin(v.cast<double>());
+        hi = hi.cwiseMax(v.cast<double>());
+      }
+      hi.y() -= 0.01;
+      const Rigid3d model_from_camera = camera_from_model.Inverse();
+      std::mt19937 rng(5);
+      std::uniform_int_distribution<int> grey(20, 235);
+      cv::Mat blocks(a.color.rows / 6 + 1, a.color.cols / 6 + 1, CV_8UC1);
+      for (int v = 0; v < blocks.rows; ++v) {
+        for (int u = 0; u < blocks.cols; ++u) blocks.at<uint8_t>(v, u) = static_cast<uint8_t>(grey(rng));
+      }
+      for (int v = 0; v < a.color.rows; ++v) {
+        for (int u = 0; u < a.color.cols; ++u) {
+          const double z = a.DepthM(u, v);
+          if (z > 0) {
+            const Eigen::Vector3d p = model_from_camera * config.camera.Unproject(u, v, z);
+            if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) continue;
+          }
+          const uint8_t g = blocks.at<uint8_t>(v / 6, u / 6);
+          odd_room.at<cv::Vec3b>(v, u) = cv::Vec3b(g, g, g);
+        }
+      }
+      odd_room_no_markers = odd_room.clone();
+      // The room markers back into one copy, where the camera's true pose
+      // puts them (with their white border).
+      const Rigid3d camera_from_room = sample.CameraGroundTruth()->front().room_from_x.Inverse();
+      int markers = 0;
+      for (const auto& m : inputs.room_map.markers) {
+        std::vector<cv::Point> poly;
+        Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+        std::vector<Eigen::Vector2d> px;
+        bool in_front = true;
+        for (const auto& c : m.corners_in_room) {
+          const Eigen::Vector3d q = camera_from_room * c;
+          in_front &= q.z() > 0.1;
+          px.push_back(config.camera.Project(q));
+          centre += px.back() / 4;
+        }
+        if (!in_front) continue;
+        for (const auto& c : px) {
+          const Eigen::Vector2d q = centre + 1.4 * (c - centre);
+          poly.emplace_back(static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y())));
+        }
+        cv::Mat mask = cv::Mat::zeros(a.color.size(), CV_8UC1);
+        cv::fillConvexPoly(mask, poly, cv::Scalar(255));
+        if (cv::countNonZero(mask) == 0) continue;
+        a.color.copyTo(odd_room, mask);
+        ++markers;
+      }
+      EXPECT_GE(markers, 1) << "the sample's first tracking frame should show a room marker";
+    }
     const fs::path dir = case_ / "tracking" / name;
     fs::create_directories(dir / "rgb");
     fs::create_directories(dir / "depth");
@@ -134,6 +194,8 @@ class TrackingStage : public ::testing::Test {
         colour = no_room;
         d = no_room_depth;
       }
+      if (kinds[i] == "odd_room") colour = odd_room;
+      if (kinds[i] == "odd_room_no_markers") colour = odd_room_no_markers;
       if (kinds[i] == "empty") {
         colour = cv::Mat(a.color.size(), CV_8UC3, cv::Scalar(128, 128, 128));
         d = cv::Mat::zeros(a.depth.size(), CV_16UC1);
@@ -370,6 +432,43 @@ TEST_F(TrackingStage, APatientSeenWhileTheCameraIsNotPlacedIsCarriedForAMoment) 
   }
   EXPECT_GE(carried, 3);
   EXPECT_EQ(frames.back().source, "tracked") << frames.back().note;
+}
+
+// A part of the room the room recording never saw (texture the map does not
+// hold) with no room marker in view: the camera is followed from the last
+// frame the map placed (by its markers, in the same unmapped surroundings)
+// by that frame's keypoints and depth, the patient tracked on, never `in`
+// even within wide tolerances, near the truth; the frames before, placed by
+// the map, read `in`.
+TEST_F(TrackingStage, ACameraWhereTheRoomWasNotMappedIsFollowedAndNeverReadsIn) {
+  std::vector<std::string> kinds(12, "odd_room");
+  for (int i = 0; i < 12; ++i) kinds.push_back("odd_room_no_markers");
+  CouchTolerances wide;
+  wide.translation_mm = 200;
+  wide.rotation_deg = 20;
+  const Run run = TrackMadeSequence("odd_room", kinds, wide);
+  ASSERT_EQ(run.frames.size(), kinds.size());
+  const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
+  const Rigid3d truth = sample.BodyGroundTruth()->front().room_from_x;
+  int in_before = 0, followed = 0;
+  for (size_t i = 0; i < kinds.size(); ++i) {
+    const auto& f = run.frames[i];
+    if (kinds[i] == "odd_room") {
+      EXPECT_EQ(f.source, "tracked") << "frame " << i << ": " << f.note;
+      in_before += f.status == TrackingFrameStatus::kInTolerance;
+      continue;
+    }
+    ASSERT_EQ(f.source, "tracked") << "frame " << i << ": " << f.note;
+    EXPECT_NE(f.note.find("camera followed by the room's keypoints"), std::string::npos) << "frame " << i << ": " << f.note;
+    EXPECT_EQ(f.status, TrackingFrameStatus::kOutOfTolerance) << "frame " << i << ": never `in` while followed";
+    ASSERT_TRUE(f.room_from_model.has_value()) << "frame " << i;
+    const PoseError e = ComputePoseError(truth, *f.room_from_model);
+    EXPECT_LT(e.translation_mm, 5.0) << "frame " << i;
+    EXPECT_LT(e.rotation_deg, 0.5) << "frame " << i;
+    ++followed;
+  }
+  EXPECT_GE(in_before, 6) << "placed by the map, those frames should read `in` within the wide tolerances";
+  EXPECT_EQ(followed, 12);
 }
 
 // The plan's room frame uncertainty is shared by every frame: it is part of
