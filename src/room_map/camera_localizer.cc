@@ -720,13 +720,15 @@ struct CameraLocalizer::Impl {
     anchor.points.clear();
     anchor.descriptors.create(0, kDescriptorBytes, CV_8UC1);
     std::vector<int> rows;
+    std::vector<std::pair<Rigid3d, Eigen::Vector3d>> boxes;  // box_from_room, half extents
+    for (const ExclusionBox& box : *moving) boxes.emplace_back(box.room_from_box.Inverse(), box.half_extent_m);
     for (size_t i = 0; i < keypoints.size(); ++i) {
       const double z = keypoints.depth_m[i];
       if (!(z >= options.follow_min_depth_m && z <= options.follow_max_depth_m)) continue;
       const Eigen::Vector3d xc((keypoint_px[i].x() - K.cx) / K.fx * z, (keypoint_px[i].y() - K.cy) / K.fy * z, z);
       const Eigen::Vector3d x = room_from_camera * xc;
       bool inside = false;
-      for (const ExclusionBox& box : *moving) inside |= box.Contains(x);
+      for (const auto& [box_from_room, half] : boxes) inside |= ((box_from_room * x).cwiseAbs() - half).maxCoeff() <= 0;
       if (inside) continue;
       anchor.points.push_back(x);
       rows.push_back(static_cast<int>(i));
