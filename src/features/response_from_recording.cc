@@ -2,11 +2,13 @@
 
 #include <algorithm>
 #include <map>
+#include <optional>
 
 #include <opencv2/aruco.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
+#include "features/sharpening.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -133,6 +135,7 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
                                             const CameraResponse& fallback,
                                             const RecordingResponseOptions& options) {
   ARPOS_CHECK(options.max_frames > 0, "max_frames must be positive");
+  ARPOS_CHECK(options.max_sharpening_frames >= 0, "max_sharpening_frames must not be negative");
   MarkerDetectorOptions d = detector;
   d.refinement = CornerRefinementMethod::kOpenCvNone;  // refined under each round's response
   d.intrinsics = intrinsics;
@@ -140,16 +143,15 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
   std::vector<ResponseFrame> frames;
   const size_t n = sequence.size();
   const size_t count = std::min<size_t>(n, options.max_frames);
-  for (size_t s = 0; s < count; ++s) {
-    const size_t i = count > 1 ? s * (n - 1) / (count - 1) : 0;
-    // Only the colour is read; a frame that cannot be read (tracking goes on
-    // past it and says so) is skipped here.
+  // Frame i's markers, or nullopt when it cannot be read (only the colour
+  // is read; tracking goes on past such a frame and says so).
+  auto read = [&](size_t i) -> std::optional<ResponseFrame> {
     RgbdFrame frame;
     std::string depth_problem;
     try {
       frame = sequence.LoadFrameColourFirst(i, intrinsics, &depth_problem);
     } catch (const InputError&) {
-      continue;
+      return std::nullopt;
     }
     ResponseFrame f;
     if (frame.color.channels() == 3) {
@@ -158,7 +160,45 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
       f.gray = frame.color;
     }
     det.Detect(f.gray, &f.markers);
-    if (!f.markers.empty()) frames.push_back(std::move(f));
+    return f;
+  };
+  std::vector<bool> done(n, false);
+  for (size_t s = 0; s < count; ++s) {
+    const size_t i = count > 1 ? s * (n - 1) / (count - 1) : 0;
+    done[i] = true;
+    std::optional<ResponseFrame> f = read(i);
+    if (f && !f->markers.empty()) frames.push_back(std::move(*f));
+  }
+  if (options.estimate_sharpening && n > count) {
+    // Marker views wide enough for the sharpening estimate, counted as it
+    // counts them; more frames read while there are too few.
+    const int dict_id = ArucoDictionaryId(detector.dictionary);
+    ARPOS_CHECK(dict_id >= 0, "unknown dictionary " << detector.dictionary);
+    const int cells = cv::aruco::getPredefinedDictionary(dict_id)->markerSize + 2 * detector.edge.border_bits;
+    const double needed_px = SharpeningCellNeededPx(options.sharpening);
+    auto wide_views = [&](const ResponseFrame& f) {
+      return static_cast<int>(std::count_if(f.markers.begin(), f.markers.end(), [&](const MarkerObservation& m) {
+        return MarkerCellWidthPx(m, cells) >= needed_px;
+      }));
+    };
+    int wide = 0;
+    for (const ResponseFrame& f : frames) wide += wide_views(f);
+    const size_t budget = std::min<size_t>(n, std::max<size_t>(count, options.max_sharpening_frames));
+    // Spread over the sequence: positions frac(k * golden ratio).
+    size_t read_frames = count;
+    for (size_t k = 1; k <= 4 * n && read_frames < budget && wide < SharpeningViewsNeeded(options.sharpening); ++k) {
+      const double u = k * 0.6180339887498949;
+      const size_t i = std::min(n - 1, static_cast<size_t>((u - std::floor(u)) * n));
+      if (done[i]) continue;
+      done[i] = true;
+      ++read_frames;
+      std::optional<ResponseFrame> f = read(i);
+      if (!f) continue;
+      const int w = wide_views(*f);
+      if (w == 0) continue;
+      wide += w;
+      frames.push_back(std::move(*f));
+    }
   }
   return EstimateResponseFromFrames(frames, detector, fallback, options);
 }

@@ -4,7 +4,9 @@
 ///
 /// A few dozen frames spread over the sequence are searched for markers of
 /// the given id ranges (room markers and body stickers alike: every printed
-/// marker is the same reference); each large enough marker gives its
+/// marker is the same reference), and more frames when they hold too few
+/// marker views wide enough for the sharpening estimate (sharpening.h);
+/// each large enough marker gives its
 /// midpoint code, and the response is fitted to all of them, alternating
 /// with re-refining the corners under the new estimate. When the data cannot
 /// tell (too few markers large enough), `fallback` is returned with
@@ -30,6 +32,13 @@ struct RecordingResponseOptions {
   /// before the response is; off: the fallback's sharpening is kept.
   bool estimate_sharpening = true;
   SharpeningEstimationOptions sharpening;
+  /// The sharpening estimate needs marker views with wide cells, which
+  /// max_frames evenly spaced frames may miss (a 300-frame xtion room
+  /// recording: 7 of the 8 needed in its 40 frames): more frames, spread
+  /// over the sequence, are searched for such views until there are enough
+  /// or this many frames have been read in all; the frames that hold one
+  /// join the estimate (EstimateRecordingResponse).
+  int max_sharpening_frames = 160;
 };
 
 struct RecordingResponse {

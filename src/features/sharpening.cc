@@ -137,6 +137,20 @@ std::string SharpeningEstimationOptions::Validate() const {
   return out.str();
 }
 
+double MarkerCellWidthPx(const MarkerObservation& marker, int cells_per_side) {
+  double shortest = 1e9;
+  for (int k = 0; k < 4; ++k) {
+    shortest = std::min(shortest, (marker.corners_px[(k + 1) % 4] - marker.corners_px[k]).norm());
+  }
+  return shortest / std::max(1, cells_per_side);
+}
+
+int SharpeningViewsNeeded(const SharpeningEstimationOptions& options) { return (options.min_edges + 3) / 4; }
+
+double SharpeningCellNeededPx(const SharpeningEstimationOptions& options) {
+  return options.min_profile_half_width_px / 0.6;
+}
+
 SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
                                       const std::vector<const std::vector<MarkerObservation>*>& markers,
                                       int cells_per_side, const SharpeningEstimationOptions& options) {
@@ -158,9 +172,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
     if (grays[f] == nullptr || grays[f]->type() != CV_8UC1 || markers[f] == nullptr) continue;
     for (const MarkerObservation& m : *markers[f]) {
       if (m.status != MarkerStatus::kRefined) continue;
-      double shortest = 1e9;
-      for (int k = 0; k < 4; ++k) shortest = std::min(shortest, (m.corners_px[(k + 1) % 4] - m.corners_px[k]).norm());
-      const double cell = shortest / cells_per_side;
+      const double cell = MarkerCellWidthPx(m, cells_per_side);
       if (cell > 0) candidates.push_back({f, &m, cell});
     }
   }
@@ -168,9 +180,9 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
             [](const Candidate& a, const Candidate& b) { return a.cell_px > b.cell_px; });
   // One reach for all (pooled profiles must be alike): the widest that
   // enough markers' quiet zones hold, within 0.6 of a cell.
-  const size_t enough = static_cast<size_t>((options.min_edges + 3) / 4);
+  const size_t enough = static_cast<size_t>(SharpeningViewsNeeded(options));
   if (candidates.size() >= enough) reach = std::min(reach, 0.6 * candidates[enough - 1].cell_px);
-  const double needed_cell_px = options.min_profile_half_width_px / 0.6;
+  const double needed_cell_px = SharpeningCellNeededPx(options);
   const long wide_enough = std::count_if(candidates.begin(), candidates.end(),
                                          [&](const Candidate& c) { return c.cell_px >= needed_cell_px - 1e-9; });
   if (candidates.size() < enough || reach < options.min_profile_half_width_px) {  // halos would not fade inside

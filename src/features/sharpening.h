@@ -95,6 +95,15 @@ struct SharpeningEstimate {
   std::string message;  ///< one line for people
 };
 
+/// A marker view's cell width as the estimate measures it (px): its shortest
+/// side over the cells across it.
+double MarkerCellWidthPx(const MarkerObservation& marker, int cells_per_side);
+
+/// What the estimate needs: this many marker views (min_edges / 4) with
+/// cells at least `min_profile_half_width_px / 0.6` wide.
+int SharpeningViewsNeeded(const SharpeningEstimationOptions& options);
+double SharpeningCellNeededPx(const SharpeningEstimationOptions& options);
+
 /// `frames`: grey images (CV_8UC1, the camera's codes) with their markers,
 /// whose `corners_px` are refined (any response). `cells_per_side`: marker
 /// bits + 2 border bits of the dictionary.

@@ -6,7 +6,14 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <random>
+
+#include <unistd.h>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "features/camera_response.h"
 #include "features/edge_refinement.h"
@@ -14,7 +21,9 @@
 #include "features/marker_render.h"
 #include "features/response_from_recording.h"
 #include "features/sharpening.h"
+#include "sensor/sequence.h"
 #include "util/check.h"
+#include "util/string_util.h"
 
 namespace arpos::testing {
 namespace {
@@ -256,6 +265,63 @@ TEST(Sharpening, FoundFromTheMarkersAndUndone) {
   EXPECT_LT(std::abs(undone), 0.03);
   EXPECT_LT(undone_median, 0.03);
   EXPECT_GT(left_median, 1.5 * undone_median + 0.01) << "the test would not tell";
+}
+
+// A recording whose evenly spaced frames show only small markers (cells of
+// 4-6 px, too narrow for the sharpening estimate) and whose other frames,
+// here and there, show large ones: the recording is searched further for
+// those, and the sharpening found; without that search it is not.
+TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("arpos_sharpening_search_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "rgb");
+  fs::create_directories(dir / "depth");
+  const CameraIntrinsics cam = VgaCamera();
+  std::mt19937 rng(41);
+  const int n = 30;
+  {
+    std::ofstream rgb(dir / "rgb.txt"), depth(dir / "depth.txt");
+    const cv::Mat no_depth = cv::Mat::zeros(cam.height, cam.width, CV_16UC1);
+    for (int f = 0; f < n; ++f) {
+      RenderOptions render;
+      render.encode = SrgbEncode;
+      render.blur_sigma_px = 0.8;
+      render.noise_sigma_grey = 1.5;
+      render.sharpen_amount = 1.0;
+      const bool large = f % 7 == 4;  // none of the 4 evenly spaced frames below
+      std::vector<MarkerPlacement> placements =
+          large ? RandomPlacements(cam, 6, 60, 90, 45, 0.1, 6 * (f % 40), &rng)
+                : RandomPlacements(cam, 6, 26, 36, 45, 0.1, 6 * (f % 40), &rng);
+      for (MarkerPlacement& p : placements) {
+        p.black_grey = 255 * SrgbEncode(0.04);
+        p.white_grey = 255 * SrgbEncode(0.8);
+      }
+      std::vector<MarkerTruth> truth;
+      const cv::Mat gray = RenderMarkers(cam, placements, render, &rng, &truth);
+      cv::Mat bgr;
+      cv::cvtColor(gray, bgr, cv::COLOR_GRAY2BGR);
+      const std::string stamp = StringPrintf("%.6f", 1.0 + f / 15.0);
+      cv::imwrite((dir / "rgb" / (stamp + ".png")).string(), bgr);
+      cv::imwrite((dir / "depth" / (stamp + ".png")).string(), no_depth);
+      rgb << stamp << " rgb/" << stamp << ".png\n";
+      depth << stamp << " depth/" << stamp << ".png\n";
+    }
+  }
+  const Sequence sequence = Sequence::Open(dir);
+  MarkerDetectorOptions detector;
+  detector.id_ranges = {{0, 249}};
+  RecordingResponseOptions options;
+  options.max_frames = 4;
+  const RecordingResponse searched = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
+  options.max_sharpening_frames = 0;
+  const RecordingResponse evenly = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
+  fs::remove_all(dir);
+  std::printf("4 evenly spaced frames: %s\nsearched further: %s\n", evenly.message.c_str(), searched.message.c_str());
+  EXPECT_FALSE(evenly.sharpening.ok) << evenly.message;
+  ASSERT_TRUE(searched.sharpening.ok) << searched.message;
+  EXPECT_NEAR(searched.response.sharpen_amount(), 1.0, 0.3) << searched.message;
+  EXPECT_GT(searched.frames_used, evenly.frames_used);
 }
 
 TEST(CameraResponse, FallsBackWhenTheDataCannotTell) {
