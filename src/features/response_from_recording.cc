@@ -62,6 +62,18 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
       lists.push_back(&refined[i]);
     }
     out.sharpening = EstimateSharpening(grays, lists, cells, options.sharpening);
+    // An earlier recording's estimate (the fallback's: the plan's, for a
+    // session) is replaced only by one from profiles of full reach: with
+    // shorter ones the amount scattered (a body scan's eight views at
+    // +-4.6 px gave 1.8 for a true 1.0 that its plan had found as 0.9).
+    std::string weaker;
+    if (out.sharpening.ok && fallback.sharpened() &&
+        out.sharpening.profile_half_width_px < options.sharpening.profile_half_width_px - 1e-9) {
+      weaker = StringPrintf(" (this recording's own, amount %.1f from profiles of +-%.1f px, is less sure)",
+                            out.sharpening.amount, out.sharpening.profile_half_width_px);
+      out.sharpening.ok = false;
+    }
+    out.kept_sharpening_note = weaker;
     if (out.sharpening.ok) amount = out.sharpening.amount, sigma = out.sharpening.sigma_px;
   }
   std::vector<ResponseFrame> unsharpened;
@@ -124,7 +136,8 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
   if (options.estimate_sharpening && (out.sharpening.ok || amount == 0)) {
     out.message += "; " + out.sharpening.message;
   } else if (amount > 0) {
-    out.message += StringPrintf("; camera sharpening kept from before (amount %.1f, radius %.1f px)", amount, sigma);
+    out.message += StringPrintf("; camera sharpening kept from before (amount %.1f, radius %.1f px)%s", amount, sigma,
+                                out.kept_sharpening_note.c_str());
   }
   return out;
 }
@@ -186,7 +199,8 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
     const size_t budget = std::min<size_t>(n, std::max<size_t>(count, options.max_sharpening_frames));
     // Spread over the sequence: positions frac(k * golden ratio).
     size_t read_frames = count;
-    for (size_t k = 1; k <= 4 * n && read_frames < budget && wide < SharpeningViewsNeeded(options.sharpening); ++k) {
+    for (size_t k = 1; k <= 4 * n && read_frames < budget && wide < options.sharpening_views_sought * SharpeningViewsNeeded(options.sharpening);
+       ++k) {
       const double u = k * 0.6180339887498949;
       const size_t i = std::min(n - 1, static_cast<size_t>((u - std::floor(u)) * n));
       if (done[i]) continue;

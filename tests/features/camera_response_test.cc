@@ -59,7 +59,7 @@ struct Recording {
 };
 
 Recording Render(const std::function<double(double)>& encode, int frames, unsigned seed, double sharpen = 0,
-                 double noise_grey = 1.5) {
+                 double noise_grey = 1.5, double min_side_px = 28, double max_side_px = 90) {
   Recording rec;
   std::mt19937 rng(seed);
   const CameraIntrinsics cam = VgaCamera();
@@ -74,7 +74,7 @@ Recording Render(const std::function<double(double)>& encode, int frames, unsign
     render.noise_sigma_grey = noise_grey;
     render.sharpen_amount = sharpen;
     std::vector<MarkerPlacement> placements =
-        RandomPlacements(cam, 6, 28, 90, 55, 0.1, 10 * f, &rng);
+        RandomPlacements(cam, 6, min_side_px, max_side_px, 55, 0.1, 10 * f, &rng);
     const double e = exposure(rng);
     for (MarkerPlacement& p : placements) {
       // Levels given as they appear in a linear image, then encoded: black ink
@@ -322,6 +322,31 @@ TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
   ASSERT_TRUE(searched.sharpening.ok) << searched.message;
   EXPECT_NEAR(searched.response.sharpen_amount(), 1.0, 0.3) << searched.message;
   EXPECT_GT(searched.frames_used, evenly.frames_used);
+}
+
+// An earlier recording's sharpening (the plan's, passed as the fallback) is
+// replaced by this recording's own estimate only when that comes from
+// profiles of full reach; markers whose cells allow shorter ones keep it.
+TEST(Sharpening, AnEarlierEstimateIsReplacedOnlyByOneOfFullReach) {
+  MarkerDetectorOptions detector;
+  const CameraResponse plan = CameraResponse::Srgb().WithSharpening(0.6, 1.0);
+  // Cells of 7.7-8.3 px (sides 46-50 px, 6 cells): profiles of +-4.6-5.0 px.
+  const Recording narrow = Render(SrgbEncode, 6, 51, 1.0, 1.5, 46, 50);
+  const RecordingResponse kept = EstimateResponseFromFrames(narrow.frames, detector, plan);
+  EXPECT_NEAR(kept.response.sharpen_amount(), 0.6, 1e-9) << kept.message;
+  EXPECT_NE(kept.message.find("kept from before"), std::string::npos) << kept.message;
+  EXPECT_NE(kept.message.find("less sure"), std::string::npos) << kept.message;
+  // With no earlier estimate the same frames give their own.
+  const RecordingResponse own = EstimateResponseFromFrames(narrow.frames, detector, CameraResponse::Srgb());
+  EXPECT_TRUE(own.sharpening.ok) << own.message;
+  EXPECT_GT(own.response.sharpen_amount(), 0) << own.message;
+  // Wide cells: the earlier estimate is replaced.
+  const Recording wide = Render(SrgbEncode, 12, 31, 1.0);
+  const RecordingResponse replaced = EstimateResponseFromFrames(wide.frames, detector, plan);
+  ASSERT_TRUE(replaced.sharpening.ok) << replaced.message;
+  EXPECT_NEAR(replaced.response.sharpen_amount(), 1.0, 0.3) << replaced.message;
+  std::printf("narrow cells, plan's 0.6 given: %s\nwide cells, plan's 0.6 given: %s\n", kept.message.c_str(),
+              replaced.message.c_str());
 }
 
 TEST(CameraResponse, FallsBackWhenTheDataCannotTell) {
