@@ -217,6 +217,27 @@ TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
   EXPECT_LT(with, 0.9 * without);
 }
 
+// Takes every room marker but the one the sequence's first frame sees best
+// out of `map`; false when that frame is not localised or shows none.
+bool KeepOnlyTheMarkerTheFirstFrameSeesBest(const CaseConfig& config, const Sequence& seq, RoomMap* map) {
+  CameraLocalizer first(*map, config.camera, MakeCameraLocalizerOptions(config));
+  const LocalizationResult r = first.Localize(seq.LoadFrame(0, config.camera));
+  if (!r.ok) return false;
+  int keep = -1;
+  double side = 0;
+  for (const auto& o : r.markers) {
+    if (o.status == MarkerStatus::kRefined && o.MeanSidePx() > side && map->FindMarker(o.id)) {
+      keep = o.id;
+      side = o.MeanSidePx();
+    }
+  }
+  if (keep < 0) return false;
+  map->markers.erase(std::remove_if(map->markers.begin(), map->markers.end(),
+                                    [keep](const RoomMapMarkerEntry& m) { return m.id != keep; }),
+                     map->markers.end());
+  return true;
+}
+
 // A tracked frame whose image holds too little (no room marker, too few
 // keypoints: a plain wall, the patient filling the view) is held by the
 // room's planes and surface in depth with the motion filter's prediction:
@@ -232,23 +253,7 @@ TEST(Localizer, TheRoomsDepthHoldsTheCameraWhereTheImageHasTooLittle) {
   const auto gt = *seq.CameraGroundTruth();
   // Only the room marker the first frame sees best stays in the map: the
   // frames that do not see it have depth alone.
-  {
-    CameraLocalizer first(map, c.folder.config.camera, MakeCameraLocalizerOptions(c.folder.config));
-    const LocalizationResult r = first.Localize(seq.LoadFrame(0, c.folder.config.camera));
-    ASSERT_TRUE(r.ok);
-    int keep = -1;
-    double side = 0;
-    for (const auto& o : r.markers) {
-      if (o.status == MarkerStatus::kRefined && o.MeanSidePx() > side && map.FindMarker(o.id)) {
-        keep = o.id;
-        side = o.MeanSidePx();
-      }
-    }
-    ASSERT_GE(keep, 0);
-    map.markers.erase(std::remove_if(map.markers.begin(), map.markers.end(),
-                                     [keep](const RoomMapMarkerEntry& m) { return m.id != keep; }),
-                      map.markers.end());
-  }
+  ASSERT_TRUE(KeepOnlyTheMarkerTheFirstFrameSeesBest(c.folder.config, seq, &map));
   struct Run {
     int ok = 0, held = 0, longest_held = 0, beyond_bound = 0;
     double held_error_mm = 0, worst_ratio = 0;
@@ -308,25 +313,9 @@ TEST(Localizer, FramesTheMapDoesNotPlaceAreFollowedFromTheLastItDid) {
   const auto& [name, dir] = c.folder.tracking.at(0);
   const Sequence seq = Sequence::Open(dir);
   const auto gt = *seq.CameraGroundTruth();
-  {
-    CameraLocalizer first(map, c.folder.config.camera, MakeCameraLocalizerOptions(c.folder.config));
-    const LocalizationResult r = first.Localize(seq.LoadFrame(0, c.folder.config.camera));
-    ASSERT_TRUE(r.ok);
-    int keep = -1;
-    double side = 0;
-    for (const auto& o : r.markers) {
-      if (o.status == MarkerStatus::kRefined && o.MeanSidePx() > side && map.FindMarker(o.id)) {
-        keep = o.id;
-        side = o.MeanSidePx();
-      }
-    }
-    ASSERT_GE(keep, 0);
-    map.markers.erase(std::remove_if(map.markers.begin(), map.markers.end(),
-                                     [keep](const RoomMapMarkerEntry& m) { return m.id != keep; }),
-                      map.markers.end());
-    map.landmarks_in_room.clear();
-    map.landmark_descriptors = cv::Mat();
-  }
+  ASSERT_TRUE(KeepOnlyTheMarkerTheFirstFrameSeesBest(c.folder.config, seq, &map));
+  map.landmarks_in_room.clear();
+  map.landmark_descriptors = cv::Mat();
   struct Run {
     int ok = 0, followed = 0, beyond_bound = 0;
     double followed_error_mm = 0, worst_ratio = 0, longest_s = 0;
