@@ -754,11 +754,19 @@ struct CameraLocalizer::Impl {
   bool Follow(const Rigid3d& predicted, const std::optional<PosePrior>& prior, double t, PoseRefinementResult* r,
               LocalizationResult* out, LocalizationTimings* tm, double* mark) {
     if (!anchor.valid || !options.use_keypoints || !(t - anchor.since_map_t <= options.max_followed_s)) return false;
-    landmarks = &anchor.points;
-    landmark_descriptors = &anchor.descriptors;
-    *r = Track(predicted, options.search_radius_px, prior, &tm->matching_ms, &tm->refinement_ms, mark);
-    landmarks = &map.landmarks_in_room;
-    landmark_descriptors = &map.landmark_descriptors;
+    {
+      // The anchor's points stand in for the map's landmarks in this Track only.
+      struct Restore {
+        Impl* m;
+        ~Restore() {
+          m->landmarks = &m->map.landmarks_in_room;
+          m->landmark_descriptors = &m->map.landmark_descriptors;
+        }
+      } restore{this};
+      landmarks = &anchor.points;
+      landmark_descriptors = &anchor.descriptors;
+      *r = Track(predicted, options.search_radius_px, prior, &tm->matching_ms, &tm->refinement_ms, mark);
+    }
     if (!r->converged || r->keypoint_inliers < options.min_keypoints_tracking ||
         !(r->keypoint_rms_px <= options.max_keypoint_rms_px)) {
       return false;
