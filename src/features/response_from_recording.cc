@@ -79,6 +79,7 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
   std::vector<ResponseFrame> unsharpened;
   if (amount > 0) {
     for (const ResponseFrame& f : frames) {
+      if (f.sharpening_only) continue;
       std::vector<cv::Rect> regions;
       for (const MarkerObservation& m : f.markers) {
         regions.push_back(MarkerReadRegion(m.detected_corners_px, cells, f.gray.size()));
@@ -101,6 +102,7 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
     std::vector<MarkerCellEdges> markers;
     int frames_used = 0;
     for (const ResponseFrame& f : read) {
+      if (f.sharpening_only) continue;
       bool used = false;
       for (const MarkerObservation& m : f.markers) {
         const CornerRefinementResult r =
@@ -211,6 +213,7 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
       const int w = wide_views(*f);
       if (w == 0) continue;
       wide += w;
+      f->sharpening_only = true;
       frames.push_back(std::move(*f));
     }
   }
