@@ -151,6 +151,7 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
                                             const RecordingResponseOptions& options) {
   ARPOS_CHECK(options.max_frames > 0, "max_frames must be positive");
   ARPOS_CHECK(options.max_sharpening_frames >= 0, "max_sharpening_frames must not be negative");
+  ARPOS_CHECK(options.sharpening_views_sought >= 1, "sharpening_views_sought must be at least 1");
   MarkerDetectorOptions d = detector;
   d.refinement = CornerRefinementMethod::kOpenCvNone;  // refined under each round's response
   d.intrinsics = intrinsics;
@@ -199,10 +200,10 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
     int wide = 0;
     for (const ResponseFrame& f : frames) wide += wide_views(f);
     const size_t budget = std::min<size_t>(n, std::max<size_t>(count, options.max_sharpening_frames));
+    const int sought = options.sharpening_views_sought * SharpeningViewsNeeded(options.sharpening);
     // Spread over the sequence: positions frac(k * golden ratio).
     size_t read_frames = count;
-    for (size_t k = 1; k <= 4 * n && read_frames < budget && wide < options.sharpening_views_sought * SharpeningViewsNeeded(options.sharpening);
-       ++k) {
+    for (size_t k = 1; k <= 4 * n && read_frames < budget && wide < sought; ++k) {
       const double u = k * 0.6180339887498949;
       const size_t i = std::min(n - 1, static_cast<size_t>((u - std::floor(u)) * n));
       if (done[i]) continue;

@@ -238,8 +238,9 @@ struct CameraLocalizerOptions {
   /// patient), are matched by projection and the pose refined on them and
   /// the room's depth. Its uncertainty is the anchor's carried to this
   /// camera plus the frame's own against the anchor; at most
-  /// `max_followed_s` after the anchor, at least min_keypoints_tracking
-  /// inliers, and within max_position_sigma_m. When the inliers fall below
+  /// `max_followed_s` after the map last placed a frame, at least
+  /// min_keypoints_tracking inliers, and within max_position_sigma_m; such
+  /// a frame is `followed` (LocalizationResult). When the inliers fall below
   /// twice that, the followed frame becomes the next anchor (its
   /// uncertainty, which grows, carried on).
   bool follow_room_keypoints = true;
