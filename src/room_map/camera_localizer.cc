@@ -38,6 +38,15 @@ void Lap(double* mark, double* bucket) {
   *mark = now;
 }
 
+// Largest-axis 1-sigma position (mm) and rotation (deg) of a pose covariance
+// over [rotation; translation].
+void PoseSigmas(const Eigen::Matrix<double, 6, 6>& cov, double* position_mm, double* rotation_deg) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pos(cov.bottomRightCorner<3, 3>(), Eigen::EigenvaluesOnly);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rot(cov.topLeftCorner<3, 3>(), Eigen::EigenvaluesOnly);
+  *position_mm = 1000 * std::sqrt(std::max(0.0, pos.eigenvalues().maxCoeff()));
+  *rotation_deg = DegFromRad(std::sqrt(std::max(0.0, rot.eigenvalues().maxCoeff())));
+}
+
 }  // namespace
 
 const char* LocalizationStatusName(LocalizationStatus status) {
@@ -653,11 +662,7 @@ struct CameraLocalizer::Impl {
     out->keypoint_rms_px = r.keypoint_rms_px;
     const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(r.information);
     if (ldlt.info() != Eigen::Success || !(r.information.diagonal().array() > 0).all()) return false;
-    const Eigen::Matrix<double, 6, 6> cov = ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pos(cov.bottomRightCorner<3, 3>());
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rot(cov.topLeftCorner<3, 3>());
-    out->position_sigma_mm = 1000 * std::sqrt(std::max(0.0, pos.eigenvalues().maxCoeff()));
-    out->rotation_sigma_deg = DegFromRad(std::sqrt(std::max(0.0, rot.eigenvalues().maxCoeff())));
+    PoseSigmas(ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()), &out->position_sigma_mm, &out->rotation_sigma_deg);
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     const bool by_markers = r.marker_inliers >= options.min_marker_corners && full >= 1 &&
                             r.marker_rms_px <= options.max_marker_rms_px;
@@ -737,10 +742,8 @@ struct CameraLocalizer::Impl {
     for (size_t r = 0; r < rows.size(); ++r) keypoints.descriptors.row(rows[r]).copyTo(anchor.descriptors.row(static_cast<int>(r)));
     anchor.camera_from_room = camera_from_room;
     anchor.cov = cov;
-    anchor.position_sigma_mm =
-        1000 * std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov.bottomRightCorner<3, 3>())
-                                           .eigenvalues()
-                                           .maxCoeff()));
+    double rotation_deg = 0;
+    PoseSigmas(cov, &anchor.position_sigma_mm, &rotation_deg);
     anchor.t = t;
     anchor.since_map_t = since_map_t;
     anchor.valid = static_cast<int>(anchor.points.size()) >= options.min_keypoints_tracking;
@@ -783,17 +786,12 @@ struct CameraLocalizer::Impl {
     // so this camera, by exp(Ad_M d), M = camera_from_room * anchor^-1.
     const Rigid3d M = r->camera_from_room * anchor.camera_from_room.Inverse();
     const Eigen::Matrix3d R = M.RotationMatrix();
-    Eigen::Matrix3d tx;
-    tx << 0, -M.translation.z(), M.translation.y(), M.translation.z(), 0, -M.translation.x(), -M.translation.y(),
-        M.translation.x(), 0;
     Mat6 Ad = Mat6::Zero();
     Ad.topLeftCorner<3, 3>() = R;
-    Ad.bottomLeftCorner<3, 3>() = tx * R;
+    Ad.bottomLeftCorner<3, 3>() = Skew(M.translation) * R;
     Ad.bottomRightCorner<3, 3>() = R;
     const Mat6 cov = ldlt.solve(Mat6::Identity()) + Ad * anchor.cov * Ad.transpose();
     if (!cov.allFinite()) return false;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pos(cov.bottomRightCorner<3, 3>());
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> rot(cov.topLeftCorner<3, 3>());
     out->markers_used = 0;
     out->keypoints_used = r->keypoint_inliers;
     out->plane_depth_samples = plane_samples_used;
@@ -801,8 +799,7 @@ struct CameraLocalizer::Impl {
     out->rms_px = r->rms_px;
     out->marker_rms_px = r->marker_rms_px;
     out->keypoint_rms_px = r->keypoint_rms_px;
-    out->position_sigma_mm = 1000 * std::sqrt(std::max(0.0, pos.eigenvalues().maxCoeff()));
-    out->rotation_sigma_deg = DegFromRad(std::sqrt(std::max(0.0, rot.eigenvalues().maxCoeff())));
+    PoseSigmas(cov, &out->position_sigma_mm, &out->rotation_sigma_deg);
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     out->followed = true;
     out->followed_s = t - anchor.since_map_t;
@@ -1079,15 +1076,15 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     } else {
       const Eigen::LDLT<Impl::Mat6> ldlt(refined.information);
       const bool invertible = ldlt.info() == Eigen::Success;
+      const Impl::Mat6 cov = invertible ? Impl::Mat6(ldlt.solve(Impl::Mat6::Identity())) : Impl::Mat6::Zero();
       m.have_cov = invertible && out.status == LocalizationStatus::kTracked;
-      if (m.have_cov) m.last_cov = ldlt.solve(Impl::Mat6::Identity());
+      if (m.have_cov) m.last_cov = cov;
       if (invertible && !out.held_by_depth) {
         // A frame the map places weakly (a few of its landmarks at the edge
         // of what the room recording covered) does not replace a recent
         // anchor it places much worse than: what follows would inherit it
         // (measured on a random-conditions case: an anchor at 10 mm taking
         // over from one at 2.8 mm 0.1 s older).
-        const Impl::Mat6 cov = ldlt.solve(Impl::Mat6::Identity());
         const bool keep = m.anchor.valid && frame.timestamp_s - m.anchor.t <= options_.anchor_keep_s &&
                           out.position_sigma_mm > options_.anchor_keep_ratio * m.anchor.position_sigma_mm;
         if (cov.allFinite() && !keep) m.SetAnchor(refined.camera_from_room, cov, frame.timestamp_s, frame.timestamp_s);
