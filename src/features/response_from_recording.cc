@@ -13,6 +13,20 @@
 #include "util/string_util.h"
 
 namespace arpos {
+namespace {
+
+// The detector's dictionary (a name the detector options checked) and the
+// cells across one of its markers, black border included.
+cv::Ptr<cv::aruco::Dictionary> DictionaryOf(const MarkerDetectorOptions& detector) {
+  const int dict_id = ArucoDictionaryId(detector.dictionary);
+  ARPOS_CHECK(dict_id >= 0, "unknown dictionary " << detector.dictionary);
+  return cv::aruco::getPredefinedDictionary(dict_id);
+}
+int CellsPerSide(const MarkerDetectorOptions& detector) {
+  return DictionaryOf(detector)->markerSize + 2 * detector.edge.border_bits;
+}
+
+}  // namespace
 
 RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& frames,
                                              const MarkerDetectorOptions& detector,
@@ -22,14 +36,12 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
   out.response = fallback;
   PixelUndistorter undistorter;
   if (detector.intrinsics.has_value()) undistorter = PixelUndistorter(*detector.intrinsics);
-  const int dict_id = ArucoDictionaryId(detector.dictionary);
-  ARPOS_CHECK(dict_id >= 0, "unknown dictionary " << detector.dictionary);
-  const cv::Ptr<cv::aruco::Dictionary> dictionary = cv::aruco::getPredefinedDictionary(dict_id);
+  const cv::Ptr<cv::aruco::Dictionary> dictionary = DictionaryOf(detector);
   CellEdgeOptions cell_options;
   cell_options.marker_bits = dictionary->markerSize;
   cell_options.border_bits = detector.edge.border_bits;
   cell_options.quiet_zone_cells = detector.edge.quiet_zone_cells;
-  const int cells = cell_options.marker_bits + 2 * cell_options.border_bits;
+  const int cells = CellsPerSide(detector);
   std::map<int, cv::Mat> bits;
   auto bits_of = [&](int id) -> const cv::Mat& {
     auto it = bits.find(id);
@@ -188,9 +200,7 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
   if (options.estimate_sharpening && n > count) {
     // Marker views wide enough for the sharpening estimate, counted as it
     // counts them; more frames read while there are too few.
-    const int dict_id = ArucoDictionaryId(detector.dictionary);
-    ARPOS_CHECK(dict_id >= 0, "unknown dictionary " << detector.dictionary);
-    const int cells = cv::aruco::getPredefinedDictionary(dict_id)->markerSize + 2 * detector.edge.border_bits;
+    const int cells = CellsPerSide(detector);
     const double needed_px = SharpeningCellNeededPx(options.sharpening);
     auto wide_views = [&](const ResponseFrame& f) {
       return static_cast<int>(std::count_if(f.markers.begin(), f.markers.end(), [&](const MarkerObservation& m) {
