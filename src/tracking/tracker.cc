@@ -4,6 +4,9 @@
 #include <cmath>
 #include <future>
 
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -63,6 +66,34 @@ Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> 
 }
 
 Tracker::~Tracker() = default;
+
+void Tracker::WarmUp() {
+  // Blocks of random grey at two scales (corners for the keypoint detector,
+  // contours for the marker search), a plane 1.5 m away.
+  const int w = intrinsics_.width, h = intrinsics_.height;
+  cv::RNG rng(0x5eed);
+  cv::Mat coarse(std::max(1, h / 24), std::max(1, w / 24), CV_8UC1), fine(std::max(1, h / 6), std::max(1, w / 6), CV_8UC1);
+  rng.fill(coarse, cv::RNG::UNIFORM, 0, 256);
+  rng.fill(fine, cv::RNG::UNIFORM, 0, 256);
+  cv::Mat a, b, gray;
+  cv::resize(coarse, a, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
+  cv::resize(fine, b, cv::Size(w, h), 0, 0, cv::INTER_NEAREST);
+  cv::addWeighted(a, 0.7, b, 0.3, 0, gray);
+  RgbdFrame frame;
+  frame.index = 0;
+  frame.timestamp_s = 0;
+  cv::cvtColor(gray, frame.color, cv::COLOR_GRAY2BGR);
+  frame.depth = cv::Mat(h, w, CV_16UC1, cv::Scalar(static_cast<int>(std::lround(1.5 * frame.depth_scale))));
+  Process(frame);
+  // Forget it.
+  camera_->Reset();
+  camera_->SetMovingRegions({CouchExclusionBox(target_)});
+  body_->Reset();
+  filter_.Reset();
+  last_room_from_camera_.reset();
+  last_room_from_model_.reset();
+  last_camera_t_ = last_model_t_ = -1;
+}
 
 CorrectionUncertainty Tracker::BoundOf(double position_sigma_mm, double rotation_sigma_deg) const {
   CorrectionUncertainty bound;

@@ -147,6 +147,13 @@ class Tracker {
   /// broken image is processed as far as it goes, or lost with a message).
   TrackedFrame Process(const RgbdFrame& frame);
 
+  /// Runs the per-frame steps once on a synthetic frame of the camera's size
+  /// (textured grey, a flat depth) and forgets it: the tracker's state
+  /// afterwards is as constructed. The first real frame then does not pay
+  /// the one-off costs of a process's first frame (threads started, buffers
+  /// first allocated and touched). Call before frames arrive.
+  void WarmUp();
+
   const Rigid3d& room_from_model_target() const { return target_; }
   const TrackerOptions& options() const { return options_; }
 

@@ -304,6 +304,9 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;
   Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target, camera,
                   tracker_options, inputs.room_from_model_at_scan);
+  // Before the first frame arrives (a live source starts in FrameFeed): the
+  // first frame's latency without the process's one-off costs.
+  tracker.WarmUp();
   std::optional<OverlayRenderer> overlay;
   if (options.overlay) overlay.emplace(inputs.model, camera);
 

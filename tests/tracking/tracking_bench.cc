@@ -12,7 +12,8 @@
 // frames of CASE/tracking/seq_00 are decoded into memory before any timing.
 // Each benchmark iteration is one frame, in recording order; the sequence is
 // played ARPOS_TRACK_BENCH_PASSES times (default 2), each pass with a fresh
-// Tracker (made outside the timing), so every pass starts by relocalising as
+// Tracker (made and warmed up outside the timing, as `arpos track` does
+// before its first frame arrives), so every pass starts by relocalising as
 // a real run does. OpenCV keeps its default thread count, as in `arpos track`.
 //
 // Time is manual: the wall time from arrival to correction, which includes
@@ -128,9 +129,10 @@ void Track(benchmark::State& state, const BenchData& data, bool parallel) {
   double camera_ms = 0, body_ms = 0, body_detection_ms = 0, body_pose_ms = 0, combine_ms = 0, depth_ms = 0;
   std::vector<double> totals, tracked_totals;
   // A pass's first frame (relocalising from nothing) apart from the rest;
-  // the very first frame of the benchmark apart again: it pays the
-  // process's one-off warm-up (thread pools, first allocations; 20 ms more
-  // at 1280x720), which a run started later in the same process does not.
+  // the very first frame of the benchmark apart again: the process's first
+  // (Tracker::WarmUp takes the one-off costs before it: threads, first
+  // allocations; without it 50-54 ms at 1280x720 against 31-32 for a later
+  // run's first frame).
   double cold_first_frame_ms = -1, first_frame_max_ms = 0, later_max_ms = 0;
   int tracked = 0;
   size_t i = 0;
@@ -142,6 +144,7 @@ void Track(benchmark::State& state, const BenchData& data, bool parallel) {
       tracker = std::make_unique<Tracker>(data.inputs.room_map, data.inputs.model, data.inputs.model_from_marker,
                                           data.inputs.room_from_model_target, data.config.camera, options,
                                           data.inputs.room_from_model_at_scan);
+      tracker->WarmUp();
     }
     RgbdFrame frame = data.frames[i];  // shallow: the colour image is only read
     if (!frame.depth.empty()) frame.depth = data.frames[i].depth.clone();

@@ -23,6 +23,7 @@
 #include "sensor/tum_io.h"
 #include "store/sqlite_database.h"
 #include "tracking/body_tracker.h"
+#include "tracking/tracker.h"
 #include "tracking/tracking_stage.h"
 
 namespace arpos {
@@ -306,6 +307,50 @@ TEST_F(TrackingStage, StickersTooSmallToReadAreSaidToBe) {
   BodyTracker tracker(inputs.model, inputs.model_from_marker, config.camera, options.body);
   const BodyPoseResult near = tracker.Track(frame, truth);
   EXPECT_EQ(near.message.find("too small"), std::string::npos) << near.message;
+}
+
+// The warm-up before the first frame (Tracker::WarmUp) leaves the tracker as
+// constructed: one that has tracked a few frames and is then warmed up
+// tracks the sequence from its start exactly as a fresh one does (camera
+// and patient poses, states, corrections).
+TEST_F(TrackingStage, AWarmUpLeavesTheTrackerAsConstructed) {
+  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+  const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
+  auto database = SqliteDatabase::Open(store_.string());
+  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const TrackerOptions options = MakeTrackerOptions(config, inputs);
+  auto make = [&] {
+    return std::make_unique<Tracker>(inputs.room_map, inputs.model, inputs.model_from_marker,
+                                     inputs.room_from_model_target, config.camera, options,
+                                     inputs.room_from_model_at_scan);
+  };
+  std::vector<RgbdFrame> frames;
+  for (size_t i = 0; i < sample.size(); ++i) frames.push_back(sample.LoadFrame(i, config.camera));
+  ASSERT_GE(frames.size(), 3u);
+  const auto fresh = make();
+  const auto used = make();
+  for (const RgbdFrame& frame : frames) used->Process(frame);
+  used->WarmUp();
+  int tracked = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const TrackedFrame a = fresh->Process(frames[i]);
+    const TrackedFrame b = used->Process(frames[i]);
+    EXPECT_EQ(a.state, b.state) << "frame " << i;
+    EXPECT_EQ(a.correction.state, b.correction.state) << "frame " << i;
+    EXPECT_EQ(a.camera.status, b.camera.status) << "frame " << i;
+    EXPECT_EQ(a.message, b.message) << "frame " << i;
+    ASSERT_EQ(a.room_from_model.has_value(), b.room_from_model.has_value()) << "frame " << i;
+    ASSERT_EQ(a.room_from_camera.has_value(), b.room_from_camera.has_value()) << "frame " << i;
+    if (a.room_from_camera) {
+      EXPECT_LT((a.room_from_camera->translation - b.room_from_camera->translation).norm(), 1e-9) << "frame " << i;
+    }
+    if (!a.room_from_model) continue;
+    ++tracked;
+    EXPECT_LT((a.room_from_model->translation - b.room_from_model->translation).norm(), 1e-9) << "frame " << i;
+    EXPECT_LT(a.room_from_model->rotation.angularDistance(b.room_from_model->rotation), 1e-9) << "frame " << i;
+    EXPECT_NEAR(a.position_sigma_mm, b.position_sigma_mm, 1e-9) << "frame " << i;
+  }
+  EXPECT_GE(tracked, 2);  // what a kept state would change
 }
 
 TEST_F(TrackingStage, BadFramesAreStatedAndTrackingRecovers) {
