@@ -1,6 +1,10 @@
 #include "features/response_from_recording.h"
 
 #include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <exception>
+#include <thread>
 #include <map>
 #include <optional>
 
@@ -167,35 +171,59 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
   MarkerDetectorOptions d = detector;
   d.refinement = CornerRefinementMethod::kOpenCvNone;  // refined under each round's response
   d.intrinsics = intrinsics;
-  MarkerDetector det(d);
+  // Two readers: frames are read and searched two at a time (the colour
+  // image alone; decoding and the marker search are most of the time).
+  MarkerDetector det_a(d), det_b(d);
   std::vector<ResponseFrame> frames;
   const size_t n = sequence.size();
   const size_t count = std::min<size_t>(n, options.max_frames);
-  // Frame i's markers, or nullopt when it cannot be read (only the colour
-  // is read; tracking goes on past such a frame and says so).
-  auto read = [&](size_t i) -> std::optional<ResponseFrame> {
-    RgbdFrame frame;
-    std::string depth_problem;
+  // Frame i's markers, or nullopt when it cannot be read (tracking goes on
+  // past such a frame and says so).
+  auto read = [&](size_t i, MarkerDetector* det) -> std::optional<ResponseFrame> {
+    cv::Mat colour;
     try {
-      frame = sequence.LoadFrameColourFirst(i, intrinsics, &depth_problem);
+      colour = sequence.LoadColour(i, intrinsics);
     } catch (const InputError&) {
       return std::nullopt;
     }
     ResponseFrame f;
-    if (frame.color.channels() == 3) {
-      cv::cvtColor(frame.color, f.gray, cv::COLOR_BGR2GRAY);
-    } else {
-      f.gray = frame.color;
-    }
-    det.Detect(f.gray, &f.markers);
+    cv::cvtColor(colour, f.gray, cv::COLOR_BGR2GRAY);
+    det->Detect(f.gray, &f.markers);
     return f;
   };
+  // The frames `indices`, in their order.
+  auto read_all = [&](const std::vector<size_t>& indices) {
+    std::vector<std::optional<ResponseFrame>> out(indices.size());
+    std::atomic<size_t> next{0};
+    std::exception_ptr failure[2];
+    auto work = [&](MarkerDetector* det, std::exception_ptr* failed) {
+      try {
+        for (size_t k; (k = next++) < indices.size();) out[k] = read(indices[k], det);
+      } catch (...) {
+        *failed = std::current_exception();
+        next = indices.size();
+      }
+    };
+    std::thread other(work, &det_b, &failure[1]);
+    work(&det_a, &failure[0]);
+    other.join();
+    for (const std::exception_ptr& f : failure) {
+      if (f) std::rethrow_exception(f);
+    }
+    return out;
+  };
   std::vector<bool> done(n, false);
-  for (size_t s = 0; s < count; ++s) {
-    const size_t i = count > 1 ? s * (n - 1) / (count - 1) : 0;
-    done[i] = true;
-    std::optional<ResponseFrame> f = read(i);
-    if (f && !f->markers.empty()) frames.push_back(std::move(*f));
+  {
+    std::vector<size_t> evenly;
+    for (size_t s = 0; s < count; ++s) {
+      const size_t i = count > 1 ? s * (n - 1) / (count - 1) : 0;
+      if (done[i]) continue;
+      done[i] = true;
+      evenly.push_back(i);
+    }
+    for (std::optional<ResponseFrame>& f : read_all(evenly)) {
+      if (f && !f->markers.empty()) frames.push_back(std::move(*f));
+    }
   }
   if (options.estimate_sharpening && n > count) {
     // Marker views wide enough for the sharpening estimate, counted as it
@@ -211,21 +239,32 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
     for (const ResponseFrame& f : frames) wide += wide_views(f);
     const size_t budget = std::min<size_t>(n, std::max<size_t>(count, options.max_sharpening_frames));
     const int sought = options.sharpening_views_sought * SharpeningViewsNeeded(options.sharpening);
-    // Spread over the sequence: positions frac(k * golden ratio).
+    // Spread over the sequence: positions frac(k * golden ratio), read in
+    // batches; a batch's frames past the point where enough were found are
+    // dropped, so the frames kept do not depend on the batch size.
+    constexpr size_t kBatch = 8;
     size_t read_frames = count;
-    for (size_t k = 1; k <= 4 * n && read_frames < budget && wide < sought; ++k) {
-      const double u = k * 0.6180339887498949;
-      const size_t i = std::min(n - 1, static_cast<size_t>((u - std::floor(u)) * n));
-      if (done[i]) continue;
-      done[i] = true;
-      ++read_frames;
-      std::optional<ResponseFrame> f = read(i);
-      if (!f) continue;
-      const int w = wide_views(*f);
-      if (w == 0) continue;
-      wide += w;
-      f->sharpening_only = true;
-      frames.push_back(std::move(*f));
+    size_t k = 1;
+    while (k <= 4 * n && read_frames < budget && wide < sought) {
+      std::vector<size_t> batch;
+      for (; k <= 4 * n && read_frames + batch.size() < budget && batch.size() < kBatch; ++k) {
+        const double u = k * 0.6180339887498949;
+        const size_t i = std::min(n - 1, static_cast<size_t>((u - std::floor(u)) * n));
+        if (done[i]) continue;
+        done[i] = true;
+        batch.push_back(i);
+      }
+      std::vector<std::optional<ResponseFrame>> read_batch = read_all(batch);
+      for (std::optional<ResponseFrame>& f : read_batch) {
+        if (wide >= sought) break;
+        ++read_frames;
+        if (!f) continue;
+        const int w = wide_views(*f);
+        if (w == 0) continue;
+        wide += w;
+        f->sharpening_only = true;
+        frames.push_back(std::move(*f));
+      }
     }
   }
   return EstimateResponseFromFrames(frames, detector, fallback, options);

@@ -86,6 +86,32 @@ cv::Mat ReadDepth(const std::filesystem::path& depth_file, const CameraIntrinsic
 }
 }  // namespace
 
+cv::Mat Sequence::LoadColour(size_t i, const CameraIntrinsics& intrinsics) const {
+  ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
+  const auto color_file = color_path(i);
+  if (!std::filesystem::exists(color_file)) ARPOS_INPUT_ERROR(color_file.string() << ": missing colour image");
+  cv::Mat color = cv::imread(color_file.string(), cv::IMREAD_UNCHANGED);
+  if (color.empty()) ARPOS_INPUT_ERROR(color_file.string() << ": unreadable or corrupt image");
+  if (color.depth() != CV_8U) {
+    ARPOS_INPUT_ERROR(color_file.string() << ": colour must be 8-bit per channel");
+  }
+  if (color.channels() == 1) {
+    cv::Mat bgr;
+    cv::cvtColor(color, bgr, cv::COLOR_GRAY2BGR);
+    color = bgr;
+  } else if (color.channels() == 4) {
+    cv::Mat bgr;
+    cv::cvtColor(color, bgr, cv::COLOR_BGRA2BGR);
+    color = bgr;
+  }
+  if (color.cols != intrinsics.width || color.rows != intrinsics.height) {
+    ARPOS_INPUT_ERROR(color_file.string() << ": image is " << color.cols << "x" << color.rows
+                                          << " but case.yaml camera is " << intrinsics.width << "x"
+                                          << intrinsics.height);
+  }
+  return color;
+}
+
 RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intrinsics,
                                          std::string* depth_problem) const {
   ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
@@ -95,27 +121,7 @@ RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intri
   frame.index = static_cast<int>(i);
   frame.timestamp_s = frames_[i].timestamp_s;
   frame.depth_scale = intrinsics.depth_scale;
-  const auto color_file = color_path(i);
-  if (!std::filesystem::exists(color_file)) ARPOS_INPUT_ERROR(color_file.string() << ": missing colour image");
-  frame.color = cv::imread(color_file.string(), cv::IMREAD_UNCHANGED);
-  if (frame.color.empty()) ARPOS_INPUT_ERROR(color_file.string() << ": unreadable or corrupt image");
-  if (frame.color.depth() != CV_8U) {
-    ARPOS_INPUT_ERROR(color_file.string() << ": colour must be 8-bit per channel");
-  }
-  if (frame.color.channels() == 1) {
-    cv::Mat bgr;
-    cv::cvtColor(frame.color, bgr, cv::COLOR_GRAY2BGR);
-    frame.color = bgr;
-  } else if (frame.color.channels() == 4) {
-    cv::Mat bgr;
-    cv::cvtColor(frame.color, bgr, cv::COLOR_BGRA2BGR);
-    frame.color = bgr;
-  }
-  if (frame.color.cols != intrinsics.width || frame.color.rows != intrinsics.height) {
-    ARPOS_INPUT_ERROR(color_file.string() << ": image is " << frame.color.cols << "x" << frame.color.rows
-                                          << " but case.yaml camera is " << intrinsics.width << "x"
-                                          << intrinsics.height);
-  }
+  frame.color = LoadColour(i, intrinsics);
   if (frames_[i].depth.empty()) {
     *depth_problem = "no depth image within " + StringPrintf("%.3f", kFrameAssociationS) + " s in depth.txt";
   } else {

@@ -45,6 +45,9 @@ class Sequence {
   /// LoadFrame; a missing, unreadable or ill-shaped depth image (or none in
   /// the list) leaves `depth` empty and says why in `*depth_problem`.
   RgbdFrame LoadFrameColourFirst(size_t i, const CameraIntrinsics& intrinsics, std::string* depth_problem) const;
+  /// Frame i's colour image alone (BGR, CV_8UC3), checked as LoadFrame checks
+  /// it (InputError naming the file); the depth image is not read.
+  cv::Mat LoadColour(size_t i, const CameraIntrinsics& intrinsics) const;
 
   /// groundtruth.txt / body_groundtruth.txt if present.
   std::optional<std::vector<StampedPose>> CameraGroundTruth() const;
