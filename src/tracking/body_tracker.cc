@@ -42,6 +42,9 @@ std::string BodyTrackerOptions::Validate() const {
   for (const auto& [id, motion] : sticker_motion_m) {
     if (!(motion >= 0 && motion < 0.05)) return "sticker_motion_m of sticker " + std::to_string(id) + " must be in [0, 5 cm)";
   }
+  if (!(shared_breathing_sigmas >= 0 && std::isfinite(shared_breathing_sigmas))) {
+    return "shared_breathing_sigmas must be finite and not negative";
+  }
   if (!(moving_surface_patch_m > 0)) return "moving_surface_patch_m must be positive";
   if (!(sticker_window_margin_px >= 0)) return "sticker_window_margin_px must not be negative";
   if (max_stickers_searched < 1) return "max_stickers_searched must be at least 1";
@@ -598,6 +601,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
       Vector6d g = Vector6d::Zero();
       chi2 = 0;
       dof = -6;
+      SharedBreathing breathing;
       for (size_t si = 0; si < stickers.size(); ++si) {
         if (!use[si]) continue;
         const SeenSticker& s = stickers[si];
@@ -626,8 +630,9 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
           rows += 2;
           dof += 2;
         }
-        AddStickerTerms(r, J, b, s.motion_m, &H, &g, &chi2);
+        AddStickerTerms(r, J, b, s.motion_m, &H, &g, &chi2, &breathing);
       }
+      breathing.Eliminate(o.shared_breathing_sigmas, &H, &g, &chi2);
       // Depth: projective association of the visible model points.
       depth_inliers = 0;
       depth_candidates = 0;

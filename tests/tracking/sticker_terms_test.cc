@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <vector>
 
 #include <Eigen/Geometry>
 
@@ -31,11 +32,10 @@ struct Sticker {
   Eigen::Vector3d normal;
 };
 
-Sticker MakeSticker() {
+Sticker MakeSticker(const Eigen::Vector3d& centre = Eigen::Vector3d(0.05, -0.02, 0.8),
+                    const Eigen::Matrix3d& R = Eigen::AngleAxisd(0.5236, Eigen::Vector3d::UnitX()).toRotationMatrix()) {
   Sticker s;
   const double f = 525, sigma = 0.2, half = 0.015;
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.5236, Eigen::Vector3d::UnitX()).toRotationMatrix();
-  const Eigen::Vector3d centre(0.05, -0.02, 0.8);
   s.normal = R * Eigen::Vector3d(0, 0, -1);
   const std::array<Eigen::Vector2d, 4> corners = {Eigen::Vector2d(-half, half), Eigen::Vector2d(half, half),
                                                   Eigen::Vector2d(half, -half), Eigen::Vector2d(-half, -half)};
@@ -107,6 +107,67 @@ TEST(StickerTerms, ResidualsBreathingCanExplainCostLittle) {
   // What is left is the prior's cost of 1 mm at 1.5 mm: (1/1.5)^2, a little less.
   EXPECT_LT(breathing, 0.45);
   EXPECT_GT(breathing, 0.3);
+}
+
+// Six stickers on a chest that rises 2 mm, each along its own normal (a
+// curved surface: the normals fan out by up to 40 degrees), and two still
+// stickers on the head: one Gauss-Newton step from the true pose. Each
+// moving sticker on its own (0.6 mm of breathing, 1 sigma) pulls the pose
+// towards the chest; the rise they share is taken out, and the step is the
+// pose part of the explicit seven-unknown solve.
+TEST(StickerTerms, TheRiseTheMovingStickersShareDoesNotMoveThePose) {
+  struct Placed {
+    Sticker s;
+    double motion_m;
+  };
+  std::vector<Placed> stickers;
+  for (int i = 0; i < 6; ++i) {
+    const double tilt = -0.7 + 0.28 * i;  // about the camera's y axis
+    const Eigen::Matrix3d R = (Eigen::AngleAxisd(tilt, Eigen::Vector3d::UnitY()) *
+                               Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitX()))
+                                  .toRotationMatrix();
+    stickers.push_back({MakeSticker(Eigen::Vector3d(-0.15 + 0.06 * i, 0.05 * (i % 2), 0.8 + 0.02 * (i % 3)), R),
+                        0.0006});
+  }
+  stickers.push_back({MakeSticker(Eigen::Vector3d(0.0, -0.25, 0.9), Eigen::Matrix3d::Identity()), 0.0});
+  stickers.push_back({MakeSticker(Eigen::Vector3d(0.08, -0.28, 0.9), Eigen::Matrix3d::Identity()), 0.0});
+  // Residuals of the moving stickers: 2 mm along their normals.
+  for (Placed& p : stickers) p.s.r = p.motion_m > 0 ? StickerResiduals(-0.002 * p.s.b) : StickerResiduals::Zero();
+  const double beta_sigma = 3;
+  const auto step = [&](bool shared) {
+    Matrix6d H = Matrix6d::Zero();
+    Vector6d g = Vector6d::Zero();
+    double chi2 = 0;
+    SharedBreathing breathing;
+    for (const Placed& p : stickers) {
+      AddStickerTerms(p.s.r, p.s.J, p.s.b, p.motion_m, &H, &g, &chi2, shared ? &breathing : nullptr);
+    }
+    if (shared) {
+      EXPECT_EQ(breathing.stickers, 6);
+      breathing.Eliminate(beta_sigma, &H, &g, &chi2);
+    }
+    return Vector6d(-H.ldlt().solve(g));
+  };
+  const Vector6d alone = step(false), together = step(true);
+  EXPECT_GT(alone.tail<3>().norm(), 0.0005) << alone.transpose();
+  EXPECT_LT(together.tail<3>().norm(), 0.1 * alone.tail<3>().norm()) << together.transpose();
+  // The same step from the seven unknowns (pose, rise) solved at once.
+  Eigen::Matrix<double, 7, 7> H7 = Eigen::Matrix<double, 7, 7>::Zero();
+  Eigen::Matrix<double, 7, 1> g7 = Eigen::Matrix<double, 7, 1>::Zero();
+  for (const Placed& p : stickers) {
+    Eigen::Matrix<double, 8, 7> J7;
+    J7 << p.s.J, p.motion_m * p.s.b;
+    Eigen::Matrix<double, 8, 8> W = Eigen::Matrix<double, 8, 8>::Identity();
+    if (p.motion_m > 0) {
+      const double k = 1.0 / (1.0 / (p.motion_m * p.motion_m) + p.s.b.squaredNorm());
+      W -= k * p.s.b * p.s.b.transpose();
+    }
+    H7 += J7.transpose() * W * J7;
+    g7 += J7.transpose() * W * p.s.r;
+  }
+  H7(6, 6) += 1 / (beta_sigma * beta_sigma);
+  const Eigen::Matrix<double, 7, 1> full = -H7.ldlt().solve(g7);
+  EXPECT_LT((full.head<6>() - together).norm(), 1e-9 * (1 + full.head<6>().norm())) << full.transpose();
 }
 
 }  // namespace
