@@ -168,6 +168,7 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
   ARPOS_CHECK(options.max_frames > 0, "max_frames must be positive");
   ARPOS_CHECK(options.max_sharpening_frames >= 0, "max_sharpening_frames must not be negative");
   ARPOS_CHECK(options.sharpening_views_sought >= 1, "sharpening_views_sought must be at least 1");
+  ARPOS_CHECK(options.response_views_sought >= 0, "response_views_sought must not be negative");
   MarkerDetectorOptions d = detector;
   d.refinement = CornerRefinementMethod::kOpenCvNone;  // refined under each round's response
   d.intrinsics = intrinsics;
@@ -225,27 +226,39 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
       if (f && !f->markers.empty()) frames.push_back(std::move(*f));
     }
   }
-  if (options.estimate_sharpening && n > count) {
-    // Marker views wide enough for the sharpening estimate, counted as it
-    // counts them; more frames read while there are too few.
+  if (n > count) {
+    // Marker views wide enough for the sharpening estimate, and for the
+    // response's, counted as those estimates count them; more frames read
+    // while there are too few.
     const int cells = CellsPerSide(detector);
-    const double needed_px = SharpeningCellNeededPx(options.sharpening);
-    auto wide_views = [&](const ResponseFrame& f) {
+    const double sharpening_px = SharpeningCellNeededPx(options.sharpening);
+    const double response_px = CellEdgeOptions{}.min_cell_px;  // as EstimateResponseFromFrames prepares them
+    auto views_of = [&](const ResponseFrame& f, double cell_px) {
       return static_cast<int>(std::count_if(f.markers.begin(), f.markers.end(), [&](const MarkerObservation& m) {
-        return MarkerCellWidthPx(m, cells) >= needed_px;
+        return MarkerCellWidthPx(m, cells) >= cell_px;
       }));
     };
-    int wide = 0;
-    for (const ResponseFrame& f : frames) wide += wide_views(f);
+    int wide = 0, response_views = 0;
+    for (const ResponseFrame& f : frames) {
+      wide += views_of(f, sharpening_px);
+      response_views += views_of(f, response_px);
+    }
+    const int sought = options.estimate_sharpening
+                           ? options.sharpening_views_sought * SharpeningViewsNeeded(options.sharpening)
+                           : 0;
+    // The response's own frames are searched for only when the evenly spaced
+    // ones cannot give it (their frames then join its fit; see the option).
+    const int response_sought =
+        response_views < options.estimation.min_markers ? options.response_views_sought * options.estimation.min_markers : 0;
+    auto enough = [&] { return wide >= sought && response_views >= response_sought; };
     const size_t budget = std::min<size_t>(n, std::max<size_t>(count, options.max_sharpening_frames));
-    const int sought = options.sharpening_views_sought * SharpeningViewsNeeded(options.sharpening);
     // Spread over the sequence: positions frac(k * golden ratio), read in
     // batches; a batch's frames past the point where enough were found are
     // dropped, so the frames kept do not depend on the batch size.
     constexpr size_t kBatch = 8;
     size_t read_frames = count;
     size_t k = 1;
-    while (k <= 4 * n && read_frames < budget && wide < sought) {
+    while (k <= 4 * n && read_frames < budget && !enough()) {
       std::vector<size_t> batch;
       for (; k <= 4 * n && read_frames + batch.size() < budget && batch.size() < kBatch; ++k) {
         const double u = k * 0.6180339887498949;
@@ -256,13 +269,15 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
       }
       std::vector<std::optional<ResponseFrame>> read_batch = read_all(batch);
       for (std::optional<ResponseFrame>& f : read_batch) {
-        if (wide >= sought) break;
+        if (enough()) break;
         ++read_frames;
         if (!f) continue;
-        const int w = wide_views(*f);
-        if (w == 0) continue;
+        const int w = options.estimate_sharpening ? views_of(*f, sharpening_px) : 0;
+        const int r = response_views < response_sought ? views_of(*f, response_px) : 0;
+        if (w == 0 && r == 0) continue;
         wide += w;
-        f->sharpening_only = true;
+        response_views += r;
+        f->sharpening_only = r == 0;
         frames.push_back(std::move(*f));
       }
     }

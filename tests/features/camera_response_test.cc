@@ -324,6 +324,75 @@ TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
   EXPECT_EQ(searched.frames_used, evenly.frames_used) << "the response keeps to the evenly spaced frames";
 }
 
+// A linear camera whose evenly spaced frames show markers too small for
+// the response (cells of 2.5-3.5 px) while other frames, here and there,
+// show larger ones: the recording is searched further for those, they join
+// the response's fit, and the response is found (not the sRGB fallback);
+// without that search it is not estimated.
+TEST(CameraResponse, ARecordingIsSearchedForMarkersLargeEnough) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / ("arpos_response_search_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir / "rgb");
+  fs::create_directories(dir / "depth");
+  const CameraIntrinsics cam = VgaCamera();
+  std::mt19937 rng(43);
+  const int n = 30;
+  const auto linear = [](double x) { return x; };
+  {
+    std::ofstream rgb(dir / "rgb.txt"), depth(dir / "depth.txt");
+    const cv::Mat no_depth = cv::Mat::zeros(cam.height, cam.width, CV_16UC1);
+    for (int f = 0; f < n; ++f) {
+      RenderOptions render;
+      render.encode = linear;
+      render.blur_sigma_px = 0.8;
+      render.noise_sigma_grey = 1.0;
+      const bool large = f % 7 == 4;  // none of the 4 evenly spaced frames below
+      std::vector<MarkerPlacement> placements =
+          large ? RandomPlacements(cam, 6, 34, 48, 45, 0.1, 6 * (f % 40), &rng)
+                : RandomPlacements(cam, 6, 15, 21, 30, 0.1, 6 * (f % 40), &rng);
+      for (MarkerPlacement& p : placements) {
+        p.black_grey = 255 * 0.04;
+        p.white_grey = 255 * 0.8;
+      }
+      std::vector<MarkerTruth> truth;
+      const cv::Mat gray = RenderMarkers(cam, placements, render, &rng, &truth);
+      cv::Mat bgr;
+      cv::cvtColor(gray, bgr, cv::COLOR_GRAY2BGR);
+      const std::string stamp = StringPrintf("%.6f", 1.0 + f / 15.0);
+      cv::imwrite((dir / "rgb" / (stamp + ".png")).string(), bgr);
+      cv::imwrite((dir / "depth" / (stamp + ".png")).string(), no_depth);
+      rgb << stamp << " rgb/" << stamp << ".png\n";
+      depth << stamp << " depth/" << stamp << ".png\n";
+    }
+  }
+  const Sequence sequence = Sequence::Open(dir);
+  MarkerDetectorOptions detector;
+  detector.id_ranges = {{0, 249}};
+  RecordingResponseOptions options;
+  options.max_frames = 4;
+  options.estimate_sharpening = false;
+  const RecordingResponse searched = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
+  options.response_views_sought = 0;
+  const RecordingResponse evenly = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
+  fs::remove_all(dir);
+  std::printf("4 evenly spaced frames: %s\nsearched further: %s\n", evenly.message.c_str(), searched.message.c_str());
+  EXPECT_FALSE(evenly.estimated) << evenly.message;
+  ASSERT_TRUE(searched.estimated) << searched.message;
+  EXPECT_GT(searched.frames_used, 0);
+  // The corners' bias (the black widening) gone under the estimate, and
+  // the curve nearer the linear truth than the fallback.
+  EXPECT_GT(searched.estimate.widening_prior_px, 0.3) << searched.message;
+  EXPECT_LT(std::abs(searched.estimate.widening_px), 0.05) << searched.message;
+  double to_linear = 0, fallback_to_linear = 0;
+  for (int code = 10; code <= 245; code += 5) {
+    to_linear = std::max(to_linear, std::abs(searched.response.LinearFraction(code) - code / 255.0));
+    fallback_to_linear =
+        std::max(fallback_to_linear, std::abs(CameraResponse::Srgb().LinearFraction(code) - code / 255.0));
+  }
+  EXPECT_LT(to_linear, 0.8 * fallback_to_linear) << to_linear << " against " << fallback_to_linear;
+}
+
 // An earlier recording's sharpening (the plan's, passed as the fallback) is
 // replaced by this recording's own estimate only when that comes from
 // profiles of full reach; markers whose cells allow shorter ones keep it.
