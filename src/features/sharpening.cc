@@ -133,6 +133,8 @@ std::string SharpeningEstimationOptions::Validate() const {
   } else if (!(profile_half_width_px > 0) || !(bin_px > 0) || min_edges < 1 ||
              max_markers < 1 || !(min_profile_half_width_px > 0 && min_profile_half_width_px <= profile_half_width_px)) {
     out << "sharpening profile settings must be positive";
+  } else if (!(min_overshoot >= 0 && min_overshoot < 1)) {
+    out << "min_overshoot must be within [0, 1)";
   }
   return out.str();
 }
@@ -284,7 +286,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   out.ok = true;
   out.overshoot_delivered = base.overshoot;
   out.overshoot_after = base.overshoot;
-  if (base.overshoot > 2 * base.tolerance) {
+  if (base.overshoot > std::max(2 * base.tolerance, options.min_overshoot)) {
     // The least amount whose undone profile is monotone within its noise
     // (more only blurs).
     for (double amount = options.amount_step; amount <= options.max_amount + 1e-9; amount += options.amount_step) {
