@@ -267,40 +267,22 @@ TEST(Sharpening, FoundFromTheMarkersAndUndone) {
   EXPECT_GT(left_median, 1.5 * undone_median + 0.01) << "the test would not tell";
 }
 
-// A recording whose evenly spaced frames show only small markers (cells of
-// 4-6 px, too narrow for the sharpening estimate) and whose other frames,
-// here and there, show large ones: the recording is searched further for
-// those, and the sharpening found; without that search it is not.
-TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
-  namespace fs = std::filesystem;
-  const fs::path dir = fs::temp_directory_path() / ("arpos_sharpening_search_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir / "rgb");
-  fs::create_directories(dir / "depth");
-  const CameraIntrinsics cam = VgaCamera();
-  std::mt19937 rng(41);
-  const int n = 30;
-  {
+// A recording folder (rgb/, depth/ with empty depth, the lists) of n frames,
+// frame f rendered by `gray_of(f)` at 15 fps; removed when it goes out of scope.
+struct RecordingFolder {
+  std::filesystem::path dir;
+  RecordingFolder(const std::string& name, int n, const CameraIntrinsics& cam,
+                  const std::function<cv::Mat(int)>& gray_of) {
+    namespace fs = std::filesystem;
+    dir = fs::temp_directory_path() / (name + "_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir / "rgb");
+    fs::create_directories(dir / "depth");
     std::ofstream rgb(dir / "rgb.txt"), depth(dir / "depth.txt");
     const cv::Mat no_depth = cv::Mat::zeros(cam.height, cam.width, CV_16UC1);
     for (int f = 0; f < n; ++f) {
-      RenderOptions render;
-      render.encode = SrgbEncode;
-      render.blur_sigma_px = 0.8;
-      render.noise_sigma_grey = 1.5;
-      render.sharpen_amount = 1.0;
-      const bool large = f % 7 == 4;  // none of the 4 evenly spaced frames below
-      std::vector<MarkerPlacement> placements =
-          large ? RandomPlacements(cam, 6, 60, 90, 45, 0.1, 6 * (f % 40), &rng)
-                : RandomPlacements(cam, 6, 26, 36, 45, 0.1, 6 * (f % 40), &rng);
-      for (MarkerPlacement& p : placements) {
-        p.black_grey = 255 * SrgbEncode(0.04);
-        p.white_grey = 255 * SrgbEncode(0.8);
-      }
-      std::vector<MarkerTruth> truth;
-      const cv::Mat gray = RenderMarkers(cam, placements, render, &rng, &truth);
       cv::Mat bgr;
-      cv::cvtColor(gray, bgr, cv::COLOR_GRAY2BGR);
+      cv::cvtColor(gray_of(f), bgr, cv::COLOR_GRAY2BGR);
       const std::string stamp = StringPrintf("%.6f", 1.0 + f / 15.0);
       cv::imwrite((dir / "rgb" / (stamp + ".png")).string(), bgr);
       cv::imwrite((dir / "depth" / (stamp + ".png")).string(), no_depth);
@@ -308,15 +290,55 @@ TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
       depth << stamp << " depth/" << stamp << ".png\n";
     }
   }
-  const Sequence sequence = Sequence::Open(dir);
+  ~RecordingFolder() { std::filesystem::remove_all(dir); }
+};
+
+// EstimateRecordingResponse on a RecordingFolder, ids 0-249, sRGB fallback.
+RecordingResponse EstimateOnFolder(const RecordingFolder& recording, const CameraIntrinsics& cam,
+                                   const RecordingResponseOptions& options) {
   MarkerDetectorOptions detector;
   detector.id_ranges = {{0, 249}};
+  return EstimateRecordingResponse(Sequence::Open(recording.dir), cam, detector, CameraResponse::Srgb(), options);
+}
+
+// Frame f of a recording whose markers are small except in frames f % 7 == 4
+// (none of 4 evenly spaced frames over 30): six markers of sides
+// [small_min, small_max] px (tilted up to small_tilt_deg) or [large_min,
+// large_max] px, printed black and white at those linear levels.
+cv::Mat MixedSizeFrame(const CameraIntrinsics& cam, int f, const RenderOptions& render, double small_min,
+                       double small_max, double small_tilt_deg, double large_min, double large_max, double black,
+                       double white, std::mt19937* rng) {
+  std::vector<MarkerPlacement> placements =
+      f % 7 == 4 ? RandomPlacements(cam, 6, large_min, large_max, 45, 0.1, 6 * (f % 40), rng)
+                 : RandomPlacements(cam, 6, small_min, small_max, small_tilt_deg, 0.1, 6 * (f % 40), rng);
+  for (MarkerPlacement& p : placements) {
+    p.black_grey = 255 * render.encode(black);
+    p.white_grey = 255 * render.encode(white);
+  }
+  std::vector<MarkerTruth> truth;
+  return RenderMarkers(cam, placements, render, rng, &truth);
+}
+
+// A recording whose evenly spaced frames show only small markers (cells of
+// 4-6 px, too narrow for the sharpening estimate) and whose other frames,
+// here and there, show large ones: the recording is searched further for
+// those, and the sharpening found; without that search it is not.
+TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
+  const CameraIntrinsics cam = VgaCamera();
+  std::mt19937 rng(41);
+  RenderOptions render;
+  render.encode = SrgbEncode;
+  render.blur_sigma_px = 0.8;
+  render.noise_sigma_grey = 1.5;
+  render.sharpen_amount = 1.0;
+  const RecordingFolder recording("arpos_sharpening_search", 30, cam, [&](int f) {
+    return MixedSizeFrame(cam, f, render, 26, 36, 45, 60, 90, 0.04, 0.8, &rng);
+  });
   RecordingResponseOptions options;
   options.max_frames = 4;
-  const RecordingResponse searched = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
+  const RecordingResponse searched = EstimateOnFolder(recording, cam, options);
   options.max_sharpening_frames = 0;
-  const RecordingResponse evenly = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
-  fs::remove_all(dir);
+  const RecordingResponse evenly = EstimateOnFolder(recording, cam, options);
   std::printf("4 evenly spaced frames: %s\nsearched further: %s\n", evenly.message.c_str(), searched.message.c_str());
   EXPECT_FALSE(evenly.sharpening.ok) << evenly.message;
   ASSERT_TRUE(searched.sharpening.ok) << searched.message;
@@ -330,52 +352,22 @@ TEST(Sharpening, ARecordingIsSearchedForMarkersWideEnough) {
 // the response's fit, and the response is found (not the sRGB fallback);
 // without that search it is not estimated.
 TEST(CameraResponse, ARecordingIsSearchedForMarkersLargeEnough) {
-  namespace fs = std::filesystem;
-  const fs::path dir = fs::temp_directory_path() / ("arpos_response_search_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir / "rgb");
-  fs::create_directories(dir / "depth");
   const CameraIntrinsics cam = VgaCamera();
   std::mt19937 rng(43);
-  const int n = 30;
   const auto linear = [](double x) { return x; };
-  {
-    std::ofstream rgb(dir / "rgb.txt"), depth(dir / "depth.txt");
-    const cv::Mat no_depth = cv::Mat::zeros(cam.height, cam.width, CV_16UC1);
-    for (int f = 0; f < n; ++f) {
-      RenderOptions render;
-      render.encode = linear;
-      render.blur_sigma_px = 0.8;
-      render.noise_sigma_grey = 1.0;
-      const bool large = f % 7 == 4;  // none of the 4 evenly spaced frames below
-      std::vector<MarkerPlacement> placements =
-          large ? RandomPlacements(cam, 6, 34, 48, 45, 0.1, 6 * (f % 40), &rng)
-                : RandomPlacements(cam, 6, 15, 21, 30, 0.1, 6 * (f % 40), &rng);
-      for (MarkerPlacement& p : placements) {
-        p.black_grey = 255 * 0.04;
-        p.white_grey = 255 * 0.8;
-      }
-      std::vector<MarkerTruth> truth;
-      const cv::Mat gray = RenderMarkers(cam, placements, render, &rng, &truth);
-      cv::Mat bgr;
-      cv::cvtColor(gray, bgr, cv::COLOR_GRAY2BGR);
-      const std::string stamp = StringPrintf("%.6f", 1.0 + f / 15.0);
-      cv::imwrite((dir / "rgb" / (stamp + ".png")).string(), bgr);
-      cv::imwrite((dir / "depth" / (stamp + ".png")).string(), no_depth);
-      rgb << stamp << " rgb/" << stamp << ".png\n";
-      depth << stamp << " depth/" << stamp << ".png\n";
-    }
-  }
-  const Sequence sequence = Sequence::Open(dir);
-  MarkerDetectorOptions detector;
-  detector.id_ranges = {{0, 249}};
+  RenderOptions render;
+  render.encode = linear;
+  render.blur_sigma_px = 0.8;
+  render.noise_sigma_grey = 1.0;
+  const RecordingFolder recording("arpos_response_search", 30, cam, [&](int f) {
+    return MixedSizeFrame(cam, f, render, 15, 21, 30, 34, 48, 0.04, 0.8, &rng);
+  });
   RecordingResponseOptions options;
   options.max_frames = 4;
   options.estimate_sharpening = false;
-  const RecordingResponse searched = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
+  const RecordingResponse searched = EstimateOnFolder(recording, cam, options);
   options.response_views_sought = 0;
-  const RecordingResponse evenly = EstimateRecordingResponse(sequence, cam, detector, CameraResponse::Srgb(), options);
-  fs::remove_all(dir);
+  const RecordingResponse evenly = EstimateOnFolder(recording, cam, options);
   std::printf("4 evenly spaced frames: %s\nsearched further: %s\n", evenly.message.c_str(), searched.message.c_str());
   EXPECT_FALSE(evenly.estimated) << evenly.message;
   ASSERT_TRUE(searched.estimated) << searched.message;
