@@ -4,9 +4,9 @@
 #include <atomic>
 #include <cmath>
 #include <exception>
-#include <thread>
 #include <map>
 #include <optional>
+#include <thread>
 
 #include <opencv2/aruco.hpp>
 #include <opencv2/imgproc.hpp>

@@ -82,6 +82,7 @@ void Tracker::WarmUp() {
   RgbdFrame frame;
   frame.index = 0;
   frame.timestamp_s = 0;
+  frame.depth_scale = intrinsics_.depth_scale;
   cv::cvtColor(gray, frame.color, cv::COLOR_GRAY2BGR);
   frame.depth = cv::Mat(h, w, CV_16UC1, cv::Scalar(static_cast<int>(std::lround(1.5 * frame.depth_scale))));
   Process(frame);
