@@ -195,6 +195,7 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
   // The frames `indices`, in their order.
   auto read_all = [&](const std::vector<size_t>& indices) {
     std::vector<std::optional<ResponseFrame>> out(indices.size());
+    if (indices.empty()) return out;
     std::atomic<size_t> next{0};
     std::exception_ptr failure[2];
     auto work = [&](MarkerDetector* det, std::exception_ptr* failed) {

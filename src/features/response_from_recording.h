@@ -77,7 +77,8 @@ struct ResponseFrame {
   cv::Mat gray;  ///< CV_8UC1, the camera's codes
   std::vector<MarkerObservation> markers;
   /// Read for its wide marker views only: used by the sharpening estimate,
-  /// not by the response's (which keeps to the evenly spaced frames).
+  /// not by the response's (which keeps to the evenly spaced frames and
+  /// those its own search found: RecordingResponseOptions).
   bool sharpening_only = false;
 };
 
