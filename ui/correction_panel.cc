@@ -114,7 +114,7 @@ void CorrectionPanel::ShowCorrection(const CouchCorrection& c, const QString& re
                              .arg(c.state == CorrectionState::kLost ? 34 : 28));
   if (c.state == CorrectionState::kLost) {
     reason_->setText(reason.isEmpty() ? tr("No pose in this frame: do not move the couch.")
-                                      : tr("No pose: %1").arg(reason.left(200)));
+                                      : tr("No pose: do not move the couch. %1").arg(reason.left(300)));
     reason_->show();
   } else {
     reason_->clear();

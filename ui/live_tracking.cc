@@ -152,6 +152,7 @@ void LiveTracking::OnFrame(const TrackedFrameEvent& event) {
   frame.timestamp_s = tracked.timestamp_s;
   frame.state = tracked.state;
   frame.correction = tracked.correction;
+  frame.loss = tracked.loss;
   frame.latency_ms = tracked.timings.total_ms;
   frame.readable = !event.colour.empty();
   frame.has_depth = event.has_depth;

@@ -48,6 +48,7 @@ struct LiveFrame {
   double timestamp_s = 0;
   TrackingState state = TrackingState::kLost;
   CouchCorrection correction;
+  TrackingLoss loss = TrackingLoss::kNone;  ///< why there is no pose
   double latency_ms = 0;       ///< frame handed to the tracker to correction ready
   double frames_per_s = 0;     ///< tracked frames per second of wall time, last 2 s
   bool readable = true;        ///< false: the colour image could not be read

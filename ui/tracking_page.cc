@@ -455,7 +455,11 @@ void TrackingPage::StartRun(bool paused) {
 
 void TrackingPage::OnFrame(const LiveFrame& frame) {
   QString reason;
-  if (frame.correction.state == CorrectionState::kLost) reason = frame.note;
+  if (frame.correction.state == CorrectionState::kLost) {
+    // What to do first, then why.
+    const QString advice = QString::fromUtf8(TrackingLossAdvice(frame.loss));
+    reason = advice.isEmpty() ? frame.note : frame.note.isEmpty() ? advice : advice + "\n" + frame.note;
+  }
   panel_->ShowCorrection(frame.correction, reason);
   panel_->ShowRate(frame.frames_per_s, frame.latency_ms);
   plot_->Add(frame.timestamp_s, frame.correction);

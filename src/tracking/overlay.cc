@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <sstream>
+#include <string>
 #include <unordered_map>
 #include <unordered_set>
 #include <vector>
@@ -134,9 +136,10 @@ std::string Signed(double value, int decimals) {
   return StringPrintf("%+.*f", decimals, rounded);
 }
 
-std::vector<std::string> PanelLines(const CouchCorrection& c) {
+std::vector<std::string> PanelLines(const CouchCorrection& c, const std::string& lost_headline) {
   if (c.state == CorrectionState::kLost) {
-    return {"LAT --  LNG --  VRT -- mm", "PITCH --  ROLL --  YAW -- deg", "PATIENT LOST"};
+    return {"LAT --  LNG --  VRT -- mm", "PITCH --  ROLL --  YAW -- deg",
+            lost_headline.empty() ? "PATIENT LOST" : lost_headline};
   }
   return {"LAT " + Signed(c.lateral_mm, 1) + " mm  LNG " + Signed(c.longitudinal_mm, 1) +
               " mm  VRT " + Signed(c.vertical_mm, 1) + " mm",
@@ -144,6 +147,32 @@ std::vector<std::string> PanelLines(const CouchCorrection& c) {
               Signed(c.yaw_deg, 2) + " deg",
           StringPrintf("%.1f mm  %.2f deg  %s", c.translation_mm, c.rotation_deg,
                        c.state == CorrectionState::kIn ? "IN TOLERANCE" : "OUT OF TOLERANCE")};
+}
+
+// `text` broken at spaces into lines no wider than `max_width` pixels (a
+// word wider than that is cut), at most `max_lines`; the last ends in
+// " ..." when words are left over.
+std::vector<std::string> WrapText(const std::string& text, int max_width, int max_lines, int font, double scale,
+                                  int thickness) {
+  int baseline = 0;
+  const auto width = [&](const std::string& s) { return cv::getTextSize(s, font, scale, thickness, &baseline).width; };
+  std::vector<std::string> words;
+  std::istringstream in(text);
+  for (std::string word; in >> word;) words.push_back(word);
+  std::vector<std::string> lines;
+  size_t next = 0;
+  while (next < words.size() && static_cast<int>(lines.size()) < max_lines) {
+    std::string line = words[next++];
+    while (next < words.size() && width(line + " " + words[next]) <= max_width) line += " " + words[next++];
+    while (line.size() > 1 && width(line) > max_width) line.pop_back();
+    lines.push_back(line);
+  }
+  if (next < words.size()) {
+    std::string& last = lines.back();
+    while (!last.empty() && width(last + " ...") > max_width) last.pop_back();
+    last += " ...";
+  }
+  return lines;
 }
 
 // Darkens `rect` of `image` (clipped to it) to kPanelKeep of its brightness.
@@ -410,8 +439,8 @@ void OverlayRenderer::RenderLayer(const Rigid3d& camera_from_model, cv::Mat* cov
 cv::Mat OverlayRenderer::Render(const cv::Mat& colour_bgr,
                                 const std::optional<Rigid3d>& camera_from_model_current,
                                 const std::optional<Rigid3d>& camera_from_model_planned,
-                                const CouchCorrection& correction,
-                                const std::string& caption) const {
+                                const CouchCorrection& correction, const std::string& caption,
+                                const std::string& lost_headline) const {
   ARPOS_CHECK(!colour_bgr.empty(), "the overlay's colour image is empty");
   ARPOS_CHECK(colour_bgr.type() == CV_8UC3,
               "the overlay's colour image must be 8-bit BGR (CV_8UC3), got OpenCV type "
@@ -464,7 +493,7 @@ cv::Mat OverlayRenderer::Render(const cv::Mat& colour_bgr,
   const int stripe = std::max(3, static_cast<int>(std::lround(glyph.height * 0.4)));
 
   const std::vector<std::string> lines =
-      options_.correction_panel ? PanelLines(correction) : std::vector<std::string>{};
+      options_.correction_panel ? PanelLines(correction, lost_headline) : std::vector<std::string>{};
   // Widest of the lines and of a wide template, so the panel does not jitter.
   int text_width =
       cv::getTextSize("LAT +88.8 mm  LNG +88.8 mm  VRT +88.8 mm", font, scale, thickness, &baseline)
@@ -489,12 +518,20 @@ cv::Mat OverlayRenderer::Render(const cv::Mat& colour_bgr,
   }
 
   if (!caption.empty()) {
-    const cv::Size size = cv::getTextSize(caption, font, scale, thickness, &baseline);
-    const cv::Rect strip(margin, H - margin - (size.height + baseline + pad), size.width + 2 * pad,
-                         size.height + baseline + pad);
+    const std::vector<std::string> caption_lines =
+        WrapText(caption, out.cols - 2 * margin - 2 * pad, 3, font, scale, thickness);
+    int caption_width = 0;
+    for (const auto& line : caption_lines) {
+      caption_width = std::max(caption_width, cv::getTextSize(line, font, scale, thickness, &baseline).width);
+    }
+    const int n = static_cast<int>(caption_lines.size());
+    const int height = pad + n * line_step - pad / 2;
+    const cv::Rect strip(margin, H - margin - height, caption_width + 2 * pad, height);
     DarkPanel(&out, strip);
-    cv::putText(out, caption, cv::Point(strip.x + pad, strip.y + pad / 2 + size.height), font,
-                scale, cv::Scalar(235, 235, 235), thickness, cv::LINE_AA);
+    for (int i = 0; i < n; ++i) {
+      cv::putText(out, caption_lines[i], cv::Point(strip.x + pad, strip.y + pad / 2 + glyph.height + i * line_step),
+                  font, scale, cv::Scalar(235, 235, 235), thickness, cv::LINE_AA);
+    }
   }
   return out;
 }

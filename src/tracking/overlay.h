@@ -98,14 +98,19 @@ class OverlayRenderer {
   /// corner coloured by `correction.state`:
   ///   "LAT +1.2 mm  LNG -0.4 mm  VRT +3.0 mm"
   ///   "PITCH +0.10  ROLL -0.20  YAW +0.05 deg"
-  ///   "3.2 mm  0.23 deg  OUT OF TOLERANCE"   (IN TOLERANCE / PATIENT LOST)
-  /// and `caption` (if not empty) as one line at the bottom. Text sits on a
-  /// dark translucent panel so it reads on any background; the panel has a
-  /// solid stripe of the state's colour (OverlayStateColor) along its left
-  /// edge, starting a few pixels from the image's top-left corner.
+  ///   "3.2 mm  0.23 deg  OUT OF TOLERANCE"   (or IN TOLERANCE)
+  /// with, when the state is lost, dashes and `lost_headline` (e.g.
+  /// "CAMERA NOT PLACED IN ROOM"; "PATIENT LOST" when empty) as the third
+  /// line; and `caption` (if not empty) at the bottom, wrapped at spaces to
+  /// the image's width, at most three lines (cut with "..." beyond). Text
+  /// sits on a dark translucent panel so it reads on any background; the
+  /// panel has a solid stripe of the state's colour (OverlayStateColor)
+  /// along its left edge, starting a few pixels from the image's top-left
+  /// corner.
   cv::Mat Render(const cv::Mat& colour_bgr, const std::optional<Rigid3d>& camera_from_model_current,
                  const std::optional<Rigid3d>& camera_from_model_planned,
-                 const CouchCorrection& correction, const std::string& caption) const;
+                 const CouchCorrection& correction, const std::string& caption,
+                 const std::string& lost_headline = "") const;
 
   /// Faces actually drawn (after simplification for display).
   int num_display_faces() const { return static_cast<int>(scene_.meshes[0].faces.size()); }

@@ -49,6 +49,33 @@ const char* TrackingStateName(TrackingState state) {
   return "lost";
 }
 
+const char* TrackingLossHeadline(TrackingLoss loss) {
+  switch (loss) {
+    case TrackingLoss::kNone: return "";
+    case TrackingLoss::kFrame: return "FRAME UNUSABLE";
+    case TrackingLoss::kCamera: return "CAMERA NOT PLACED IN ROOM";
+    case TrackingLoss::kPatient: return "PATIENT NOT FOUND";
+    case TrackingLoss::kCameraAndPatient: return "CAMERA AND PATIENT NOT FOUND";
+    case TrackingLoss::kUncertain: return "POSE TOO UNCERTAIN";
+  }
+  return "";
+}
+
+const char* TrackingLossAdvice(TrackingLoss loss) {
+  switch (loss) {
+    case TrackingLoss::kNone: return "";
+    case TrackingLoss::kFrame: return "The camera's image could not be used: check the camera and its cable.";
+    case TrackingLoss::kCamera:
+      return "Bring a room marker into view, or a part of the room the room recording covered.";
+    case TrackingLoss::kPatient: return "Bring the patient's stickers into view, nearer or less obliquely.";
+    case TrackingLoss::kCameraAndPatient:
+      return "Point the camera at the patient's stickers with a room marker in view.";
+    case TrackingLoss::kUncertain:
+      return "Hold the camera steady, nearer the patient, with a room marker in view.";
+  }
+  return "";
+}
+
 Tracker::Tracker(RoomMap map, const TriangleMesh& model, std::map<int, Rigid3d> model_from_marker,
                  const Rigid3d& room_from_model_target, const CameraIntrinsics& intrinsics,
                  const TrackerOptions& options, const std::optional<Rigid3d>& room_from_model_expected)
@@ -258,7 +285,10 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
                      "patient %.1f mm)",
                      own_sigma_mm, out.camera.position_sigma_mm, out.camera.rotation_sigma_deg,
                      out.body.position_sigma_mm);
-    if (!CarryByMotion(frame.timestamp_s, why, &out)) out.message = why;
+    if (!CarryByMotion(frame.timestamp_s, why, &out)) {
+      out.message = why;
+      out.loss = TrackingLoss::kUncertain;
+    }
   } else if (!out.camera.ok && out.body.ok && CarryByMotion(frame.timestamp_s, camera_failure(), &out)) {
     // Done: the patient's pose predicted, the camera implied by it.
   } else if (!out.camera.ok || !out.body.ok) {
@@ -270,6 +300,9 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     }
     if (!depth_note.empty()) why += "; " + depth_note;
     out.message = why;
+    out.loss = !out.camera.ok && !out.body.ok ? TrackingLoss::kCameraAndPatient
+               : !out.camera.ok              ? TrackingLoss::kCamera
+                                             : TrackingLoss::kPatient;
     if (!out.camera.ok && out.body.ok) {
       // The patient seen, the camera not placed: the next relocalisation
       // searches first where the patient's last (or expected) room pose
@@ -329,6 +362,7 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
                      "camera held by the room's depth and its motion (no room marker, few keypoints)";
     }
   }
+  if (out.state != TrackingState::kLost) out.loss = TrackingLoss::kNone;
   out.timings.combine_ms = MsSince(t_combine);
   out.timings.total_ms = MsSince(start);
   return out;

@@ -103,6 +103,21 @@ enum class TrackingState {
 };
 const char* TrackingStateName(TrackingState state);
 
+/// Why a frame has no pose, in terms of what the person holding the camera
+/// can do about it.
+enum class TrackingLoss {
+  kNone = 0,          ///< a pose (tracked or carried)
+  kFrame,             ///< the frame could not be read or processed
+  kCamera,            ///< the patient seen, the camera not placed in the room
+  kPatient,           ///< the camera placed, the patient not found
+  kCameraAndPatient,  ///< neither
+  kUncertain,         ///< both found, the pose too uncertain to report
+};
+/// A display's headline, upper case ("CAMERA NOT PLACED IN ROOM"); "" for kNone.
+const char* TrackingLossHeadline(TrackingLoss loss);
+/// What to do, one sentence; "" for kNone.
+const char* TrackingLossAdvice(TrackingLoss loss);
+
 struct TrackedFrame {
   int index = -1;
   double timestamp_s = 0;
@@ -120,6 +135,9 @@ struct TrackedFrame {
   double position_sigma_mm = 0;
   double rotation_sigma_deg = 0;
   CouchCorrection correction;
+  /// Why there is no pose: kNone exactly when state is not kLost (a frame
+  /// never processed: kFrame).
+  TrackingLoss loss = TrackingLoss::kFrame;
   LocalizationResult camera;
   BodyPoseResult body;
   std::string message;  ///< why lost or carried

@@ -1,6 +1,7 @@
 #include "tracking/tracking_stage.h"
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -179,9 +180,17 @@ TrackerOptions MakeTrackerOptions(const CaseConfig& config, const TrackingInputs
 std::string TrackSequenceResult::Summary() const {
   std::ostringstream out;
   if (stopped) out << StringPrintf("stopped after %d of %d frames; ", frames, sequence_frames);
-  out << StringPrintf("tracking %s: %d frames, %d tracked, %d carried, %d lost (%.1f %%); %d in tolerance, %d out",
+  // Why frames were lost, as the display says it: "22 camera not placed in room, ...".
+  std::string causes;
+  for (size_t k = 0; k < lost_by_cause.size(); ++k) {
+    if (lost_by_cause[k] == 0) continue;
+    std::string what = TrackingLossHeadline(static_cast<TrackingLoss>(k));
+    std::transform(what.begin(), what.end(), what.begin(), [](unsigned char c) { return std::tolower(c); });
+    causes += "; " + std::to_string(lost_by_cause[k]) + " " + what;
+  }
+  out << StringPrintf("tracking %s: %d frames, %d tracked, %d carried, %d lost (%.1f %%%s); %d in tolerance, %d out",
                       name.c_str(), frames, tracked, carried, lost, frames ? 100.0 * lost / frames : 0.0,
-                      in_tolerance, out_of_tolerance);
+                      causes.c_str(), in_tolerance, out_of_tolerance);
   if (lost_with_stickers) out << StringPrintf("; %d lost with stickers in view", lost_with_stickers);
   if (dropped) out << StringPrintf("; %d of %d camera frames dropped (the tracker too far behind)", dropped, sequence_frames);
   out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
@@ -367,6 +376,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
       case TrackingState::kCarried: ++result.carried; break;
       case TrackingState::kLost:
         ++result.lost;
+        ++result.lost_by_cause.at(static_cast<size_t>(tracked.loss));
         if (!tracked.body.sticker_ids.empty() || !tracked.body.stickers_dropped.empty()) ++result.lost_with_stickers;
         break;
     }
@@ -412,10 +422,15 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     if (overlay && readable) {
       const std::optional<Rigid3d>& current = overlay_poses.camera_from_model_current;
       const std::optional<Rigid3d>& planned = overlay_poses.camera_from_model_planned;
+      // What to do first when lost, then why (wrapped to the image's width).
+      const std::string advice = TrackingLossAdvice(tracked.loss);
+      const std::string why = advice.empty() ? tracked.message
+                              : tracked.message.empty() ? advice
+                                                        : advice + " (" + tracked.message + ")";
       const std::string caption = StringPrintf("t %.3f s  frame %zu  %s%s%s", t, i, TrackingStateName(tracked.state),
-                                               tracked.message.empty() ? "" : ": ",
-                                               tracked.message.substr(0, 80).c_str());
-      const cv::Mat image = overlay->Render(frame.color, current, planned, tracked.correction, caption);
+                                               why.empty() ? "" : ": ", why.c_str());
+      const cv::Mat image =
+          overlay->Render(frame.color, current, planned, tracked.correction, caption, TrackingLossHeadline(tracked.loss));
       const std::filesystem::path file = options.out_dir / "overlay" / StringPrintf("%.6f.png", t);
       if (!cv::imwrite(file.string(), image)) ARPOS_INPUT_ERROR(file.string() << ": could not be written");
     }

@@ -11,8 +11,9 @@
 /// the timestamps, no body in view) each get a stated state and the run goes
 /// on.
 
-#include <filesystem>
+#include <array>
 #include <chrono>
+#include <filesystem>
 #include <functional>
 #include <map>
 #include <optional>
@@ -174,6 +175,8 @@ struct TrackSequenceResult {
   int in_tolerance = 0, out_of_tolerance = 0;
   /// Frames lost while at least one mapped sticker was detected.
   int lost_with_stickers = 0;
+  /// Lost frames by why (index: TrackingLoss).
+  std::array<int, 6> lost_by_cause{};
   double mean_total_ms = 0, p95_total_ms = 0, max_total_ms = 0;
   std::string response_message;  ///< the recording's camera response
   /// How well the plan's room frame is known and what that does to the

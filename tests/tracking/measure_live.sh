@@ -61,7 +61,7 @@ for spec in "$@"; do
   captured=$(echo "$live" | sed -n 's/live: \([0-9]*\) frames captured.*/\1/p')
   tracked=$(echo "$live" | sed -n 's/.*captured, \([0-9]*\) tracked.*/\1/p')
   dropped=$(echo "$live" | sed -n 's/.*tracked, \([0-9]*\) dropped.*/\1/p')
-  lost=$(echo "$summary" | sed -n 's/.* lost (\([0-9.]*\) %).*/\1/p')
+  lost=$(echo "$summary" | sed -n 's/.* lost (\([0-9.]*\) %.*/\1/p')
   ms=$(echo "$summary" | sed -n 's/.*; \([0-9.]*\) ms per frame (p95 \([0-9.]*\),.*/\1\t\2/p')
   rec_written=$(echo "$rec" | sed -n 's/.*: \([0-9]*\) frames written.*/\1/p')
   rec_dropped=$(echo "$rec" | sed -n 's/.*; \([0-9]*\) dropped (writer behind).*/\1/p')

@@ -304,6 +304,54 @@ TEST(Overlay, PanelTakesTheStateColour) {
   EXPECT_EQ(without.at<cv::Vec3b>(k.height - 8, 8)[0], 200);
 }
 
+// Rows from the bottom of column `u` that the caption's strip darkened
+// (the frame is a uniform 200 grey).
+int DarkRowsFromBottom(const cv::Mat& image, int u) {
+  int top = -1;
+  for (int v = image.rows - 1; v >= image.rows / 2; --v) {
+    if (image.at<cv::Vec3b>(v, u)[0] < 150) top = v;
+  }
+  return top < 0 ? 0 : image.rows - top;
+}
+
+// A lost frame names why in the panel; a caption longer than the image is
+// wrapped into at most three lines within the image, not cut off at its edge.
+TEST(Overlay, ALostFrameSaysWhyAndALongCaptionIsWrapped) {
+  const CameraIntrinsics k = TestCamera();
+  const OverlayRenderer renderer(BoxMesh(Eigen::Vector3f(0.1f, 0.1f, 0.1f)), k);
+  const cv::Mat frame(k.height, k.width, CV_8UC3, cv::Scalar(200, 200, 200));
+  const cv::Rect panel_text(12, 8, 400, 70);
+  const cv::Mat plain = renderer.Render(frame, std::nullopt, std::nullopt, LostCorrection(), "");
+  const cv::Mat named = renderer.Render(frame, std::nullopt, std::nullopt, LostCorrection(), "",
+                                        "CAMERA AND PATIENT NOT FOUND");
+  // The third line differs ("PATIENT LOST" by default), the first two not.
+  cv::Mat diff;
+  cv::absdiff(plain(panel_text), named(panel_text), diff);
+  cv::cvtColor(diff, diff, cv::COLOR_BGR2GRAY);
+  const cv::Rect first_lines = cv::boundingRect(diff > 40);
+  ASSERT_FALSE(first_lines.empty());
+  EXPECT_GT(first_lines.y, 35) << "only the third line changes";
+  // A headline of a frame with a pose is not shown.
+  const cv::Mat out_frame =
+      renderer.Render(frame, std::nullopt, std::nullopt, OutCorrection(), "", "CAMERA AND PATIENT NOT FOUND");
+  const cv::Mat out_plain = renderer.Render(frame, std::nullopt, std::nullopt, OutCorrection(), "");
+  EXPECT_EQ(cv::norm(out_frame, out_plain, cv::NORM_INF), 0);
+
+  const cv::Mat one = renderer.Render(frame, std::nullopt, std::nullopt, LostCorrection(), "t 1.000 s  frame 3  lost");
+  std::string words;
+  for (int i = 0; i < 80; ++i) words += "word" + std::to_string(i) + " ";
+  const cv::Mat many = renderer.Render(frame, std::nullopt, std::nullopt, LostCorrection(), words);
+  const int one_line = DarkRowsFromBottom(one, 8);
+  const int three_lines = DarkRowsFromBottom(many, 8);
+  ASSERT_GT(one_line, 10);
+  // The padding above and below is shared: three lines are 2.2-2.3 times one.
+  EXPECT_GT(three_lines, 2 * one_line);
+  EXPECT_LT(three_lines, 3 * one_line);
+  // Within the image: the strip ends before the right edge.
+  EXPECT_EQ(many.at<cv::Vec3b>(k.height - 8, k.width - 2)[0], 200);
+  EXPECT_LT(many.at<cv::Vec3b>(k.height - 8, k.width - 80)[0], 150) << "the strip spans most of the width";
+}
+
 template <typename F>
 std::string ErrorOf(F&& f) {
   try {

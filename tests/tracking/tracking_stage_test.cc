@@ -219,6 +219,7 @@ class TrackingStage : public ::testing::Test {
     TrackSequenceOptions options;
     TrackSequenceResult result;
     std::vector<TrackingFrameRecord> frames;
+    std::vector<TrackingLoss> losses;  ///< per frame, as the tracker said
   };
   // `room_frame_sigma_mm`, if given, stands for the plan's room frame
   // uncertainty at the isocentre.
@@ -234,6 +235,7 @@ class TrackingStage : public ::testing::Test {
     run.options.sequence_dir = seq;
     run.options.out_dir = root_ / ("out_" + name);
     run.options.tolerances = tolerances;
+    run.options.on_frame = [&run](const TrackedFrameEvent& event) { run.losses.push_back(event.tracked->loss); };
     run.result = TrackSequence(database.get(), run.inputs, config, run.options);
     run.frames = database->GetTrackingFrames(run.result.run_id);
     return run;
@@ -388,6 +390,23 @@ TEST_F(TrackingStage, BadFramesAreStatedAndTrackingRecovers) {
   // Nothing in view: lost; then recovered.
   EXPECT_EQ(sources[13], "lost") << frames[13].note;
   EXPECT_EQ(sources[14], "tracked") << frames[14].note;
+  // Each lost frame says why in the terms of what to do; a frame with a pose
+  // has no loss.
+  ASSERT_EQ(run.losses.size(), kinds.size());
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const TrackingLoss expected = i == 7 || i == 8 ? TrackingLoss::kPatient
+                                  : i == 10        ? TrackingLoss::kFrame
+                                  : i == 13        ? TrackingLoss::kCameraAndPatient
+                                                   : TrackingLoss::kNone;
+    EXPECT_EQ(run.losses[i], expected) << "frame " << i << ": " << frames[i].note;
+    EXPECT_EQ(std::string(TrackingLossHeadline(run.losses[i])).empty(), expected == TrackingLoss::kNone);
+    EXPECT_EQ(std::string(TrackingLossAdvice(run.losses[i])).empty(), expected == TrackingLoss::kNone);
+  }
+  // The run's summary counts them by why.
+  const std::string summary = run.result.Summary();
+  EXPECT_NE(summary.find("4 lost (26.7 %; 1 frame unusable; 2 patient not found; 1 camera and patient not found)"),
+            std::string::npos)
+      << summary;
 
   // Every pose is the sample frame's true pose within a few millimetres, and
   // the stored verdicts match the files.
@@ -462,8 +481,11 @@ TEST_F(TrackingStage, APatientSeenWhileTheCameraIsNotPlacedIsCarriedForAMoment) 
     const auto& f = frames[i];
     if (f.source == "lost") {
       EXPECT_NE(f.note.find("camera not localised"), std::string::npos) << "frame " << i << ": " << f.note;
+      // The patient in view, the room not: the camera is what to move.
+      EXPECT_EQ(run.losses[i], TrackingLoss::kCamera) << "frame " << i << ": " << f.note;
       continue;
     }
+    EXPECT_EQ(run.losses[i], TrackingLoss::kNone) << "frame " << i;
     EXPECT_EQ(f.source, "carried") << "frame " << i << ": " << f.note;
     EXPECT_EQ(carried, static_cast<int>(i) - settle) << "carried frames come first, then lost ones";
     ++carried;
