@@ -675,10 +675,23 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   result.times.reconstruction_s = t_recon;
   result.reconstruction_points = static_cast<int>(body.size());
   result.reconstruction = body;
+  // When few frames were placed (in the room, or by the stickers), that is
+  // the cause to name with what follows from it.
+  int frames_posed = 0;
+  for (const ScanFrame& f : frames) frames_posed += f.posed ? 1 : 0;
+  const auto few_placed = [&]() -> std::string {
+    if (2 * frames_posed >= result.frames_considered) return "";
+    return StringPrintf("; the camera was placed in %d of the %d frames used (%d by the room map, %d more by the "
+                        "stickers): ",
+                        frames_posed, result.frames_considered, result.frames_localized,
+                        result.frames_posed_by_stickers) +
+           DescribeUnmappedRoomMarkers(result.unmapped_room_markers, plan.room_map,
+                                       plan.room_from_model_target.translation);
+  };
   if (body.size() < 500) {
     ARPOS_INPUT_ERROR(folder.body_scan_dir.string()
                       << ": no usable body surface in the scan (" << body.size()
-                      << " points near the planned patient position after removing the couch)");
+                      << " points near the planned patient position after removing the couch)" << few_placed());
   }
   if (static_cast<int>(result.marker_map.markers.size()) < options.min_stickers) {
     // Tracking follows the patient by these stickers: without enough of
@@ -691,7 +704,12 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       why << "; seen but left out:";
       for (const auto& [id, reason] : result.marker_map.rejected) why << " " << id << " (" << reason << ")";
     }
-    why << ". Put stickers on skin the camera sees and record the scan again";
+    // Stickers read in the scan but not mapped: the map is seeded from the
+    // frames the room map places; too few of those is the cause.
+    int frames_with_stickers = 0;
+    for (const ScanFrame& f : frames) frames_with_stickers += f.view.markers.empty() ? 0 : 1;
+    const std::string placed = frames_with_stickers >= 3 ? few_placed() : "";
+    why << (placed.empty() ? ". Put stickers on skin the camera sees and record the scan again" : placed);
     ARPOS_INPUT_ERROR(why.str());
   }
 
