@@ -62,6 +62,9 @@ std::string BodyTrackerOptions::Validate() const {
     return "min_depth_inlier_fraction must be in [0, 1]";
   }
   if (min_depth_inliers < 1) return "min_depth_inliers must be at least 1";
+  if (!(min_depth_inlier_fraction_with_stickers >= 0 && min_depth_inlier_fraction_with_stickers <= 1)) {
+    return "min_depth_inlier_fraction_with_stickers must be in [0, 1]";
+  }
   if (!(max_position_sigma_m > 0)) return "max_position_sigma_m must be positive";
   std::string reason;
   if (!detector.Check(&reason)) return "detector: " + reason;
@@ -392,7 +395,8 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   // 1: one sticker read, and its pose put the model off the surface: a
   // single small sticker's pose is poorly determined (its two IPPE
   // solutions, a blurred corner), while the prediction is a few millimetres
-  // off. Again from the prediction, the stickers refined where the surface
+  // off (so is the pose of two small stickers turned about the line through
+  // them: min_depth_inlier_fraction_with_stickers). Again from the prediction, the stickers refined where the surface
   // puts them (measured on a case with random conditions: 1-sticker frames
   // fitted with 28 of ~800 depth points, lost; from the prediction 2-3
   // stickers). 2: no window held a sticker and the surface alone did not
@@ -784,6 +788,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   result.depth_inliers = depth_inliers;
   result.depth_rms_mm = depth_inliers ? 1000 * std::sqrt(depth_sq / depth_inliers) : 0;
   const double inlier_fraction = depth_candidates ? static_cast<double>(depth_inliers) / depth_candidates : 0;
+  result.depth_inlier_fraction = inlier_fraction;
   const bool surface_ok = depth_inliers >= o.min_depth_inliers && inlier_fraction >= o.min_depth_inlier_fraction;
 
   ARPOS_DEBUG("body frame " << frame.index << ": " << n_stickers << " stickers (rms " << result.sticker_rms_px
@@ -807,7 +812,13 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
 
   bool accept = false;
   if (n_stickers >= 2) {
-    accept = true;
+    accept = !(have_depth && depth_candidates >= o.min_depth_inliers &&
+               inlier_fraction < o.min_depth_inlier_fraction_with_stickers);
+    if (!accept) {
+      result.message = StringPrintf("the stickers' pose disagrees with the surface in depth (%d of %d points agree)",
+                                    depth_inliers, depth_candidates);
+      if (predicted && !from_hint && search == Search::kWindows) result.retry = 1;
+    }
   } else if (n_stickers == 1) {
     accept = surface_ok;
     if (!accept) {
