@@ -396,9 +396,10 @@ BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Ri
   // single small sticker's pose is poorly determined (its two IPPE
   // solutions, a blurred corner), while the prediction is a few millimetres
   // off (so is the pose of two small stickers turned about the line through
-  // them: min_depth_inlier_fraction_with_stickers). Again from the prediction, the stickers refined where the surface
-  // puts them (measured on a case with random conditions: 1-sticker frames
-  // fitted with 28 of ~800 depth points, lost; from the prediction 2-3
+  // them: min_depth_inlier_fraction_with_stickers). Again from the
+  // prediction, the stickers refined where the surface puts them (measured
+  // on a case with random conditions: 1-sticker frames fitted with 28 of
+  // ~800 depth points, lost; from the prediction 2-3
   // stickers). 2: no window held a sticker and the surface alone did not
   // hold: the prediction may be off after a jerk of the camera; the whole
   // image (measured on a case with random conditions: 7 frames lost with

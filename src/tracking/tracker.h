@@ -23,6 +23,7 @@
 ///
 /// Thread-safety: one Tracker per stream; Process() is called from one thread.
 
+#include <cstddef>
 #include <map>
 #include <memory>
 #include <optional>
@@ -113,6 +114,7 @@ enum class TrackingLoss {
   kCameraAndPatient,  ///< neither
   kUncertain,         ///< both found, the pose too uncertain to report
 };
+constexpr std::size_t kTrackingLossCount = static_cast<std::size_t>(TrackingLoss::kUncertain) + 1;
 /// A display's headline, upper case ("CAMERA NOT PLACED IN ROOM"); "" for kNone.
 const char* TrackingLossHeadline(TrackingLoss loss);
 /// What to do, one sentence; "" for kNone.

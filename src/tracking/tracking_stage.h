@@ -176,7 +176,7 @@ struct TrackSequenceResult {
   /// Frames lost while at least one mapped sticker was detected.
   int lost_with_stickers = 0;
   /// Lost frames by why (index: TrackingLoss).
-  std::array<int, 6> lost_by_cause{};
+  std::array<int, kTrackingLossCount> lost_by_cause{};
   double mean_total_ms = 0, p95_total_ms = 0, max_total_ms = 0;
   std::string response_message;  ///< the recording's camera response
   /// How well the plan's room frame is known and what that does to the
