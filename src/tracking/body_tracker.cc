@@ -138,6 +138,11 @@ struct BodyTracker::Impl {
   };
   std::deque<Past> past;
   int frames_without_stickers = 0;
+  // How much of the surface in view usually agrees with an accepted pose
+  // from two or more stickers (running mean; -1: none yet): a depth camera
+  // with a bias the plan did not remove agrees less everywhere, and that
+  // is not a contradiction.
+  double usual_depth_fraction = -1;
 
   // Per-frame buffers.
   std::vector<std::pair<int, float>> candidates;
@@ -386,6 +391,7 @@ bool BodyTracker::HasRecentPose(double t) const {
 void BodyTracker::Reset() {
   impl_->past.clear();
   impl_->frames_without_stickers = 0;
+  impl_->usual_depth_fraction = -1;
 }
 
 BodyPoseResult BodyTracker::Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint) {
@@ -812,9 +818,12 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   result.timings.pose_ms = MsSince(t_pose);
 
   bool accept = false;
+  const bool surface_counts = have_depth && depth_candidates >= o.min_depth_inliers;
   if (n_stickers >= 2) {
-    accept = !(have_depth && depth_candidates >= o.min_depth_inliers &&
-               inlier_fraction < o.min_depth_inlier_fraction_with_stickers);
+    // Contradicted: little of the surface agrees, and much less than usually
+    // does (not before a frame has shown what usually does).
+    accept = !(surface_counts && inlier_fraction < o.min_depth_inlier_fraction_with_stickers &&
+               m.usual_depth_fraction > 0 && inlier_fraction < 0.5 * m.usual_depth_fraction);
     if (!accept) {
       result.message = StringPrintf("the stickers' pose disagrees with the surface in depth (%d of %d points agree)",
                                     depth_inliers, depth_candidates);
@@ -850,6 +859,10 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   result.ok = true;
   result.camera_from_model = pose;
   result.source = carried ? BodyPoseSource::kCarried : BodyPoseSource::kStickers;
+  if (n_stickers >= 2 && surface_counts) {
+    m.usual_depth_fraction =
+        m.usual_depth_fraction < 0 ? inlier_fraction : 0.9 * m.usual_depth_fraction + 0.1 * inlier_fraction;
+  }
   if (carried) {
     ++m.frames_without_stickers;
     result.message = StringPrintf("no sticker in view: carried on the surface (%d of %d frames)",

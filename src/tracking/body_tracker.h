@@ -148,11 +148,14 @@ struct BodyTrackerOptions {
   int min_depth_inliers = 200;
   /// A pose from two or more stickers that the surface contradicts: at
   /// least min_depth_inliers of the model's points in view have a depth
-  /// reading and fewer than this share of them agree. Refused, and tried
-  /// again from the prediction (two small stickers can agree on a pose
-  /// turned about the line through them; measured on a d435 case with
-  /// random conditions: 50 deg and 90 mm off, 4-6 % of ~850 points within
-  /// the gate, reported with a 16 mm bound; right poses 0.95).
+  /// reading, fewer than this share of them agree, and fewer than half the
+  /// share that usually agrees in this run (accepted frames so far; none
+  /// yet: not refused, so a depth bias the plan left does not lose every
+  /// frame). Refused, and tried again from the prediction (two small
+  /// stickers can agree on a pose turned about the line through them;
+  /// measured on a d435 case with random conditions: 50 deg and 90 mm off,
+  /// 4-6 % of ~850 points within the gate, reported with a 16 mm bound;
+  /// right poses 0.95).
   double min_depth_inlier_fraction_with_stickers = 0.25;
   /// A pose whose own 1-sigma position uncertainty at the model origin
   /// exceeds this is not reported (m).

@@ -296,8 +296,8 @@ TEST_F(TrackingStage, StickersTheSurfaceContradictsAreNotReported) {
   const Rigid3d truth =
       sample.CameraGroundTruth()->front().room_from_x.Inverse() * sample.BodyGroundTruth()->front().room_from_x;
   const RgbdFrame frame = sample.LoadFrame(0, config.camera);
+  BodyTracker tracker(inputs.model, inputs.model_from_marker, config.camera, options.body);
   {
-    BodyTracker tracker(inputs.model, inputs.model_from_marker, config.camera, options.body);
     const BodyPoseResult r = tracker.Track(frame, truth);
     ASSERT_TRUE(r.ok) << r.message;
     EXPECT_GE(r.sticker_ids.size(), 2u);
@@ -313,10 +313,18 @@ TEST_F(TrackingStage, StickersTheSurfaceContradictsAreNotReported) {
     cv::circle(keep, cv::Point(static_cast<int>(px.x()), static_cast<int>(px.y())), 25, cv::Scalar(255), cv::FILLED);
   }
   RgbdFrame far = frame;
+  far.timestamp_s += 1.0 / 30;
   far.depth = frame.depth.clone();
   cv::add(frame.depth, cv::Scalar(0.080 * frame.depth_scale), far.depth, (frame.depth > 0) & (keep == 0));
-  BodyTracker tracker(inputs.model, inputs.model_from_marker, config.camera, options.body);
-  const BodyPoseResult r = tracker.Track(far, truth);
+  // The next frame of the run (the frame before showed what usually agrees).
+  const BodyPoseResult r = tracker.Track(far);
+  {
+    // A run whose first frame is that one: nothing says what usually
+    // agrees (a depth bias everywhere would look the same), so it stands.
+    BodyTracker fresh(inputs.model, inputs.model_from_marker, config.camera, options.body);
+    const BodyPoseResult first = fresh.Track(far, truth);
+    EXPECT_TRUE(first.ok) << first.message;
+  }
   EXPECT_FALSE(r.ok) << "a pose the surface contradicts was reported: " << r.sticker_ids.size() << " stickers, "
                      << r.depth_inliers << " depth inliers";
   EXPECT_GE(r.sticker_ids.size(), 2u) << r.message;
