@@ -249,8 +249,8 @@ RecordingResponse EstimateRecordingResponse(const Sequence& sequence,
                            : 0;
     // The response's own frames are searched for only when the evenly spaced
     // ones cannot give it (their frames then join its fit; see the option).
-    const int response_sought =
-        response_views < options.estimation.min_markers ? options.response_views_sought * options.estimation.min_markers : 0;
+    const int needed = options.estimation.min_markers;
+    const int response_sought = response_views < needed ? options.response_views_sought * needed : 0;
     auto enough = [&] { return wide >= sought && response_views >= response_sought; };
     const size_t budget = std::min<size_t>(n, std::max<size_t>(count, options.max_sharpening_frames));
     // Spread over the sequence: positions frac(k * golden ratio), read in

@@ -429,8 +429,8 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
                                                         : advice + " (" + tracked.message + ")";
       const std::string caption = StringPrintf("t %.3f s  frame %zu  %s%s%s", t, i, TrackingStateName(tracked.state),
                                                why.empty() ? "" : ": ", why.c_str());
-      const cv::Mat image =
-          overlay->Render(frame.color, current, planned, tracked.correction, caption, TrackingLossHeadline(tracked.loss));
+      const cv::Mat image = overlay->Render(frame.color, current, planned, tracked.correction, caption,
+                                            TrackingLossHeadline(tracked.loss));
       const std::filesystem::path file = options.out_dir / "overlay" / StringPrintf("%.6f.png", t);
       if (!cv::imwrite(file.string(), image)) ARPOS_INPUT_ERROR(file.string() << ": could not be written");
     }

@@ -283,10 +283,11 @@ TEST_F(TrackingStage, AHintAFewMillimetresOffFindsTheStickersWithoutArUco) {
 
 // Stickers the depth contradicts: the sample's first frame with its depth
 // 80 mm deeper than the stickers put the patient, except around the
-// stickers (a small share of the surface within the gate). Two or more stickers used to be taken as they
-// were (on a d435 case two small stickers agreed on a pose 50 deg and 90 mm
-// off, 5 % of the surface agreeing, reported with a 16 mm bound); now such a
-// pose is refused and said; the same frame with its own depth is tracked.
+// stickers (a small share of the surface within the gate). Two or more
+// stickers used to be taken as they were (on a d435 case two small stickers
+// agreed on a pose 50 deg and 90 mm off, 5 % of the surface agreeing,
+// reported with a 16 mm bound); now such a pose is refused and said, after
+// a frame with its own depth has shown what usually agrees.
 TEST_F(TrackingStage, StickersTheSurfaceContradictsAreNotReported) {
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
