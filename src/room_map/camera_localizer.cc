@@ -95,6 +95,11 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
+  else if (relocalisation_surface_points < 1 || !(relocalisation_surface_min_depth_m > 0) ||
+           !(relocalisation_surface_gate_m > 0) || relocalisation_surface_min_beyond < 1 ||
+           !(relocalisation_surface_max_beyond_fraction > 0 &&
+             relocalisation_surface_max_beyond_fraction <= 1))
+    out << "relocalisation surface check settings must be positive (the fraction at most 1)";
   else if (min_depth_held_samples < 1 || !(max_depth_held_position_sigma_m > 0) || max_depth_held_frames < 1) {
     out << "depth-held tracking needs at least one sample and frame and a positive sigma";
   }
@@ -192,6 +197,39 @@ struct CameraLocalizer::Impl {
   RoomSurfaceIndex surface;
   // Depth samples the last AddRoomDepths matched.
   int plane_samples_used = 0, surface_samples_used = 0;
+
+  // The room's still surface as seen through at `camera_from_room`: of the
+  // surface points in view with a depth reading at their pixel, how many
+  // the reading agrees with and how many it lies clearly beyond (the camera
+  // would be seeing through a surface the room recording found still).
+  struct SeenThrough {
+    int agree = 0;
+    int beyond = 0;
+  };
+  SeenThrough SurfaceSeenThrough(const Rigid3d& camera_from_room) const {
+    SeenThrough out;
+    if (depth_image == nullptr || depth_image->empty()) return out;
+    const RoomSurface& room = map.surface;
+    const size_t step = std::max<size_t>(1, room.size() / options.relocalisation_surface_points);
+    for (size_t i = 0; i < room.size(); i += step) {
+      const Eigen::Vector3d x = camera_from_room * room.points[i].cast<double>();
+      if (!(x.z() > options.relocalisation_surface_min_depth_m)) continue;
+      const Eigen::Vector2d px = lens.Distort(K.Project(x));
+      const int u = static_cast<int>(std::lround(px.x())),
+                v = static_cast<int>(std::lround(px.y()));
+      if (u < 0 || v < 0 || u >= depth_image->cols || v >= depth_image->rows) continue;
+      const uint16_t raw = depth_image->at<uint16_t>(v, u);
+      if (raw == 0) continue;
+      const double z = raw / K.depth_scale;
+      const double gate = std::max(options.relocalisation_surface_gate_m, 4 * DepthSigma(x.z()));
+      if (z > x.z() + gate) {
+        ++out.beyond;
+      } else if (z >= x.z() - gate) {
+        ++out.agree;
+      }
+    }
+    return out;
+  }
 
   Impl(const RoomMap& m, const CameraIntrinsics& k, const CameraLocalizerOptions& o)
       : map(m), K(k), options(o), extractor(o.keypoints) {
@@ -672,6 +710,24 @@ struct CameraLocalizer::Impl {
     // Markers that disagree badly with an otherwise keypoint-based pose would
     // mean a wrong pose or a moved marker: require consistency when both exist.
     if (by_keypoints && r.marker_inliers > 0 && r.marker_rms_px > 2 * options.max_marker_rms_px) return false;
+    // Keypoints alone, without a motion prior: where the frame's depth sees
+    // through the room's still surface, the pose is wrong, however well the
+    // keypoints agree (keypoints along one line on a far wall leave the
+    // camera free to turn about that line).
+    if (!tracking && !by_markers && by_keypoints && options.verify_relocalisation_with_surface) {
+      const SeenThrough seen = SurfaceSeenThrough(r.camera_from_room);
+      if (seen.beyond >= options.relocalisation_surface_min_beyond &&
+          seen.beyond >
+              options.relocalisation_surface_max_beyond_fraction * (seen.agree + seen.beyond)) {
+        std::ostringstream why;
+        why << "keypoints alone give a pose at which the frame's depth sees through the room's "
+               "still surface ("
+            << seen.beyond << " of " << seen.agree + seen.beyond
+            << " surface points in view lie in front of what the depth reads); refused";
+        out->message = why.str();
+        return false;
+      }
+    }
     // Keypoints alone, without a motion prior: only a well-conditioned pose.
     if (!tracking && !by_markers && by_keypoints &&
         !(out->position_sigma_mm <= 1000 * options.max_relocalisation_position_sigma_m)) {

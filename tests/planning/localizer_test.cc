@@ -563,6 +563,65 @@ TEST(Localizer, PoorlyConditionedKeypointRelocalisationIsRefused) {
   EXPECT_NE(refused.message.find("poorly conditioned"), std::string::npos) << refused.message;
 }
 
+// A keypoint-only relocalisation is checked against the room's still
+// surface: where the frame's depth reads beyond the surface's points in
+// view, the camera would be seeing through it, so the pose is wrong
+// (keypoints along one line on a far wall leave the camera free to turn
+// about that line). Here the map's surface is replaced by points along the
+// frame's own rays at a fraction of the depth read there: in front of what
+// the depth reads (seen through: refused), at it (accepted), and behind it
+// (hidden by what stands in front: accepted).
+TEST(Localizer, AKeypointRelocalisationWhoseDepthSeesThroughTheRoomsSurfaceIsRefused) {
+  const auto& c = GetSmallCase();
+  const CameraIntrinsics& K = c.folder.config.camera;
+  CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+  options.use_markers = false;       // keypoints only
+  options.use_room_surface = false;  // the surface only checks the pose here
+  const Sequence seq = Sequence::Open(c.folder.room_dir);
+  std::optional<size_t> frame_index;
+  Rigid3d room_from_camera;
+  for (size_t i = 1; i < seq.size() && !frame_index; ++i) {
+    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
+    const LocalizationResult r = alone.Localize(seq.LoadFrame(i, K));
+    if (r.ok && r.status == LocalizationStatus::kRelocalized) {
+      frame_index = i;
+      room_from_camera = r.room_from_camera;
+    }
+  }
+  ASSERT_TRUE(frame_index.has_value()) << "no frame localisable by keypoints alone";
+  const RgbdFrame frame = seq.LoadFrame(*frame_index, K);
+  auto with_surface_at = [&](double fraction, bool check = true) {
+    RoomMap map = GetSmallCaseMap().map;
+    map.surface = RoomSurface();
+    map.surface.voxel_m = 0.03;
+    for (int v = 4; v < frame.depth.rows; v += 16) {
+      for (int u = 4; u < frame.depth.cols; u += 16) {
+        const uint16_t raw = frame.depth.at<uint16_t>(v, u);
+        if (raw == 0) continue;
+        const double z = fraction * raw / K.depth_scale;
+        const Eigen::Vector3d x((u - K.cx) / K.fx * z, (v - K.cy) / K.fy * z, z);
+        map.surface.points.push_back((room_from_camera * x).cast<float>());
+        map.surface.normals.push_back(
+            (room_from_camera.rotation * Eigen::Vector3d::UnitZ()).cast<float>());
+      }
+    }
+    EXPECT_GT(map.surface.size(), 200u);
+    EXPECT_EQ(map.surface.Validate(), "");
+    CameraLocalizerOptions o = options;
+    o.verify_relocalisation_with_surface = check;
+    CameraLocalizer localizer(map, K, o);
+    return localizer.Localize(frame);
+  };
+  const LocalizationResult seen_through = with_surface_at(0.6);
+  EXPECT_FALSE(seen_through.ok);
+  EXPECT_NE(seen_through.message.find("sees through the room's still surface"), std::string::npos)
+      << seen_through.message;
+  EXPECT_TRUE(with_surface_at(1.0).ok);
+  EXPECT_TRUE(with_surface_at(1.6).ok);
+  // Without the check the same pose stands.
+  EXPECT_TRUE(with_surface_at(0.6, false).ok);
+}
+
 TEST(Localizer, FrameWithoutMarkersOrTextureIsLostAndTrackingRecovers) {
   const auto& c = GetSmallCase();
   const CameraIntrinsics& K = c.folder.config.camera;
