@@ -547,9 +547,11 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
       const Eigen::Matrix3d Rt = reference.rotation.toRotationMatrix().transpose();
       for (int m : options.covariance_markers) {
         Eigen::Matrix3d c = Eigen::Matrix3d::Constant(std::numeric_limits<double>::infinity());
+        Eigen::Matrix3d rc = c;
         const bool fixed = m >= 0 && m < static_cast<int>(markers.size()) && P.marker_fixed[m];
         if (m == ref || (fixed && ref_blocks == 0)) {  // nothing between them varies
           c.setZero();
+          rc.setZero();
         } else if (ok && m >= 0 && m < static_cast<int>(markers.size()) && marker_used[m] &&
                    (free_marker(m) || ref_blocks)) {
           // A fixed marker (the map's root) varies only through the reference.
@@ -579,9 +581,16 @@ BaSummary RunBundleAdjustment(BaProblem* problem, const BaOptions& options) {
             }
             if (free_marker(m)) J.block<3, 3>(0, n - 3) = Eigen::Matrix3d::Identity();
             c = Rt * (J * joint * J.transpose()) * Rt.transpose();
+            // Orientation of m in the reference's frame, R_ref^T R_m: a left
+            // increment of either turns it by twice the increment.
+            Eigen::MatrixXd Jr = Eigen::MatrixXd::Zero(3, n);
+            if (ref_blocks) Jr.block<3, 3>(0, 0) = -2 * Eigen::Matrix3d::Identity();
+            if (free_marker(m)) Jr.block<3, 3>(0, n - 6) = 2 * Eigen::Matrix3d::Identity();
+            rc = Rt * (Jr * joint * Jr.transpose()) * Rt.transpose();
           }
         }
         summary.relative_centre_covariance.push_back(c);
+        summary.relative_rotation_covariance.push_back(rc);
       }
       summary.covariance_seconds =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - t_cov).count();

@@ -142,6 +142,9 @@ struct BaSummary {
   /// everything else the adjustment estimates (cameras, landmarks, planes,
   /// the other markers); infinite where it could not be computed.
   std::vector<Eigen::Matrix3d> relative_centre_covariance;
+  /// Row for row: the covariance (rad^2) of that marker's orientation
+  /// relative to the reference marker's, about the reference's axes.
+  std::vector<Eigen::Matrix3d> relative_rotation_covariance;
   double covariance_seconds = 0;
 };
 

@@ -91,8 +91,8 @@ RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingI
   const RoomMap& map = build.map;
   const RoomMapBuildReport& r = build.report;
   RoomMapRecord record = ToRecord(map, plan, room_recording);
-  record.room_frame_tilt_sigma_deg = Measured(r.room_frame_tilt_sigma_deg);
-  record.room_frame_yaw_sigma_deg = Measured(r.room_frame_yaw_sigma_deg);
+  record.room_frame_tilt_sigma_deg = Measured(r.CouchTiltSigmaDeg());
+  record.room_frame_yaw_sigma_deg = Measured(r.CouchYawSigmaDeg());
   record.room_frame_couch_sigma_mm = Measured(r.CouchSigmaMm());
   std::string details = StringPrintf(
       "plan %lld, %zu markers (origin %d), %d landmarks, marker residual mean %.3f px max %.3f px, "
@@ -105,7 +105,8 @@ RoomMapId StoreRoomMap(Database* database, PlanId plan, std::optional<RecordingI
                           r.origin_observations, r.room_frame_tilt_sigma_deg, r.room_frame_yaw_sigma_deg,
                           r.room_frame_couch_sigma_mm);
   if (r.map_couch_markers > 0) {
-    details += StringPrintf("; the map near the couch relative to it %.3f mm (1 sigma)", r.map_couch_sigma_mm);
+    details += StringPrintf("; the map near the couch relative to it %.3f mm, tilt %.4f deg, yaw %.4f deg (1 sigma)",
+                            r.map_couch_sigma_mm, r.map_couch_tilt_sigma_deg, r.map_couch_yaw_sigma_deg);
   }
   if (!r.camera_response.empty()) details += "; " + OneLine(r.camera_response);
   if (!r.depth_correction.empty()) details += "; " + OneLine(r.depth_correction);

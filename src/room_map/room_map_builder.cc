@@ -484,9 +484,10 @@ std::string RoomMapBuildReport::ToText() const {
       origin_observations, room_frame_tilt_sigma_deg, room_frame_yaw_sigma_deg,
       room_frame_couch_sigma_mm);
   if (map_couch_markers > 0) {
-    out << StringPrintf("; the map near the couch relative to it %.3f mm (1 sigma, median of %d marker(s) near "
-                        "the couch, over everything the adjustment estimates; %.2f s)",
-                        map_couch_sigma_mm, map_couch_markers, map_couch_covariance_s);
+    out << StringPrintf("; the map near the couch relative to it %.3f mm, tilt %.4f deg, yaw %.4f deg (1 sigma, "
+                        "median of %d marker(s) near the couch, over everything the adjustment estimates; %.2f s)",
+                        map_couch_sigma_mm, map_couch_tilt_sigma_deg, map_couch_yaw_sigma_deg, map_couch_markers,
+                        map_couch_covariance_s);
   }
   if (origin_plane_views > 0) {
     out << StringPrintf("; tilt from the origin's views and the depth of its plane in %d views", origin_plane_views);
@@ -1812,11 +1813,23 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     for (const Eigen::Matrix3d& c : couch_covariance.relative_centre_covariance) {
       if (c.allFinite()) sigmas.push_back(std::sqrt(std::max(0.0, c.trace())) * 1000);
     }
+    std::vector<double> tilts, yaws;
+    for (const Eigen::Matrix3d& c : couch_covariance.relative_rotation_covariance) {
+      if (!c.allFinite()) continue;
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> tilt(c.topLeftCorner<2, 2>());
+      tilts.push_back(std::sqrt(std::max(0.0, tilt.eigenvalues().maxCoeff())) * 180 / M_PI);
+      yaws.push_back(std::sqrt(std::max(0.0, c(2, 2))) * 180 / M_PI);
+    }
+    auto median = [](std::vector<double> v) {
+      std::sort(v.begin(), v.end());
+      const size_t n = v.size();
+      return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    };
     report.map_couch_markers = static_cast<int>(sigmas.size());
-    if (!sigmas.empty()) {
-      std::sort(sigmas.begin(), sigmas.end());
-      const size_t n = sigmas.size();
-      report.map_couch_sigma_mm = n % 2 ? sigmas[n / 2] : 0.5 * (sigmas[n / 2 - 1] + sigmas[n / 2]);
+    if (!sigmas.empty()) report.map_couch_sigma_mm = median(sigmas);
+    if (!tilts.empty()) {
+      report.map_couch_tilt_sigma_deg = median(tilts);
+      report.map_couch_yaw_sigma_deg = median(yaws);
     }
     report.map_couch_covariance_s = couch_covariance.covariance_seconds;
     // Said when it, not the origin's own views, is what is weak.

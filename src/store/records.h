@@ -150,7 +150,9 @@ struct RoomMapRecord {
   /// yaw about its normal, and the position error at the plan's isocentre:
   /// the larger of the origin's own and the map's near the couch relative
   /// to the origin (RoomMapBuildReport::CouchSigmaMm; maps planned before
-  /// 2026-12-04 hold the origin's own alone).
+  /// 2026-12-04 hold the origin's own alone); tilt and yaw likewise
+  /// (CouchTiltSigmaDeg, CouchYawSigmaDeg; before 2026-12-05 the origin's
+  /// own alone).
   /// Empty: not measured (maps from before schema version 4, or too few views).
   std::optional<double> room_frame_tilt_sigma_deg;
   std::optional<double> room_frame_yaw_sigma_deg;

@@ -205,6 +205,12 @@ TEST(RoomMapOrigin, FramesTiedOnlyByTwoViewKeypointsAreTiedInTheAdjustment) {
   ASSERT_GT(r.map_couch_markers, 0);
   EXPECT_LT(r.map_couch_sigma_mm, 30.0);
   EXPECT_GE(r.CouchSigmaMm(), r.room_frame_couch_sigma_mm);
+  // Its orientation near the couch relative to the origin, as stored.
+  EXPECT_TRUE(std::isfinite(r.map_couch_tilt_sigma_deg) && r.map_couch_tilt_sigma_deg > 0);
+  EXPECT_TRUE(std::isfinite(r.map_couch_yaw_sigma_deg) && r.map_couch_yaw_sigma_deg > 0);
+  EXPECT_GE(r.CouchTiltSigmaDeg(), r.room_frame_tilt_sigma_deg);
+  EXPECT_GE(r.CouchYawSigmaDeg(), r.room_frame_yaw_sigma_deg);
+  EXPECT_NE(r.ToText().find("the map near the couch relative to it"), std::string::npos);
   const auto near = NearCouchMarkerErrorsMm(built.map, c.truth, options.couch_point_in_room);
   for (const auto& [id, e] : near) {
     std::printf("marker %d near the couch: %.2f mm off (the map there 1 sigma %.2f mm)\n", id, e, r.map_couch_sigma_mm);

@@ -40,6 +40,7 @@
 
 #include "eval/trajectory_eval.h"
 #include "features/response_from_recording.h"
+#include "geometry/so3.h"
 #include "geometry/umeyama.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
@@ -247,6 +248,10 @@ int main(int argc, char** argv) {
         const Eigen::Vector3d couch = build_options.couch_point_in_room;
         std::cout << StringPrintf("room frame error at the couch point (map's best fit to the truth): %.3f mm\n",
                                   (truth_from_map * couch - couch).norm() * 1000);
+        // Its turn about the origin's in-plane axes (tilt) and its normal (yaw).
+        const Eigen::Vector3d w = RotationVectorFromQuaternion(truth_from_map.rotation);
+        std::cout << StringPrintf("room frame turn (map's best fit to the truth): tilt %.4f deg, yaw %.4f deg\n",
+                                  DegFromRad(std::hypot(w.x(), w.y())), DegFromRad(std::abs(w.z())));
         double s2 = 0, mx = 0;
         for (size_t i = 0; i < est.size(); ++i) {
           const double e = (fit->target_from_source * est[i] - tru[i]).norm() * 1000;

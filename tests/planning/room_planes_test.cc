@@ -297,7 +297,10 @@ TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheve
   options.covariance_reference = 0;
   options.covariance_markers = {2, 0};
   // Mean normalised squared error of the far marker and its mean 1 sigma
-  // (mm) over 40 draws, with or without keypoints on the floor.
+  // (mm) over 40 draws, with or without keypoints on the floor; and the
+  // same for its orientation relative to the origin's.
+  double rotation_nees = 0;
+  int rotation_draws = 0;
   auto draw = [&](bool keypoints) {
     double nees = 0, sigma_mm = 0;
     const int draws = 40;
@@ -314,6 +317,18 @@ TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheve
       const Eigen::Vector3d e = p.room_from_marker[2].translation - scene.room_from_marker[2].translation;
       nees += e.dot(c.ldlt().solve(e));
       sigma_mm += 1000 * std::sqrt(c.trace());
+      EXPECT_EQ(s.relative_rotation_covariance.size(), 2u);
+      if (s.relative_rotation_covariance.size() == 2u) {
+        EXPECT_TRUE(s.relative_rotation_covariance[1].isZero()) << "a marker relative to itself";
+        const Eigen::Matrix3d& rc = s.relative_rotation_covariance[0];
+        EXPECT_TRUE(rc.allFinite());
+        const Eigen::Quaterniond est = p.room_from_marker[0].rotation.inverse() * p.room_from_marker[2].rotation;
+        const Eigen::Quaterniond truth =
+            scene.room_from_marker[0].rotation.inverse() * scene.room_from_marker[2].rotation;
+        const Eigen::Vector3d w = RotationVectorFromQuaternion(est * truth.inverse());
+        rotation_nees += w.dot(rc.ldlt().solve(w));
+        ++rotation_draws;
+      }
     }
     return std::make_pair(nees / draws, sigma_mm / draws);
   };
@@ -328,6 +343,12 @@ TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheve
   EXPECT_GT(nees_kp, 1.5);
   EXPECT_LT(nees_kp, 6.0);
   EXPECT_LT(sigma_kp_mm, 0.8 * sigma_mm);
+  // The orientation's covariance is as honest (80 draws, 3 expected).
+  std::printf("far marker's orientation: mean NEES %.2f over %d draws\n", rotation_nees / rotation_draws,
+              rotation_draws);
+  EXPECT_EQ(rotation_draws, 80);
+  EXPECT_GT(rotation_nees / rotation_draws, 1.5);
+  EXPECT_LT(rotation_nees / rotation_draws, 6.0);
 
   // The map held by the far marker instead: its centre in the origin's
   // frame (the origin free, the reference) has the same covariance.
@@ -343,6 +364,13 @@ TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheve
   std::printf("origin fixed: sigma %.3f mm; far marker fixed: %.3f mm\n", 1000 * std::sqrt(ca.trace()),
               1000 * std::sqrt(cb.trace()));
   EXPECT_LT((ca - cb).norm(), 0.1 * ca.norm());
+  // And its orientation relative to the origin's.
+  ASSERT_EQ(sb.relative_rotation_covariance.size(), 2u);
+  const Eigen::Matrix3d ra = sa.relative_rotation_covariance[0], rb = sb.relative_rotation_covariance[0];
+  ASSERT_TRUE(rb.allFinite());
+  std::printf("orientation: origin fixed %.4f deg; far marker fixed %.4f deg\n",
+              DegFromRad(std::sqrt(ra.trace())), DegFromRad(std::sqrt(rb.trace())));
+  EXPECT_LT((ra - rb).norm(), 0.1 * ra.norm());
 }
 
 // The depth check (depth_check.h) on the floor scene's markers seen from
