@@ -64,6 +64,19 @@ const RoomMap& HundredLandmarkMap() {
   return map;
 }
 
+// The first frame of `seq` after its first that a fresh localiser places by
+// relocalisation (with `options`), and what it said; nullopt if none.
+std::optional<std::pair<size_t, LocalizationResult>> FirstRelocalisedFrame(const Sequence& seq,
+                                                                           const CameraIntrinsics& K,
+                                                                           const CameraLocalizerOptions& options) {
+  for (size_t i = 1; i < seq.size(); ++i) {
+    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
+    const LocalizationResult r = alone.Localize(seq.LoadFrame(i, K));
+    if (r.ok && r.status == LocalizationStatus::kRelocalized) return std::make_pair(i, r);
+  }
+  return std::nullopt;
+}
+
 TEST(Localizer, TrackingFramesWithinTolerance) {
   const auto& c = GetSmallCase();
   const RoomMap& map = GetSmallCaseMap().map;
@@ -542,23 +555,16 @@ TEST(Localizer, PoorlyConditionedKeypointRelocalisationIsRefused) {
   CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
   options.use_markers = false;  // keypoints only
   const Sequence seq = Sequence::Open(c.folder.room_dir);
-  std::optional<size_t> frame_index;
-  double sigma_mm = 0;
-  for (size_t i = 1; i < seq.size() && !frame_index; ++i) {
-    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
-    const LocalizationResult r = alone.Localize(seq.LoadFrame(i, K));
-    if (r.ok && r.status == LocalizationStatus::kRelocalized) {
-      frame_index = i;
-      sigma_mm = r.position_sigma_mm;
-    }
-  }
-  ASSERT_TRUE(frame_index.has_value()) << "no frame localisable by keypoints alone";
+  const auto found = FirstRelocalisedFrame(seq, K, options);
+  ASSERT_TRUE(found.has_value()) << "no frame localisable by keypoints alone";
+  const size_t frame_index = found->first;
+  const double sigma_mm = found->second.position_sigma_mm;
   ASSERT_GT(sigma_mm, 0.1);
 
   CameraLocalizerOptions strict = options;
   strict.max_relocalisation_position_sigma_m = 0.5 * sigma_mm / 1000;
   CameraLocalizer cold(GetSmallCaseMap().map, K, strict);
-  const LocalizationResult refused = cold.Localize(seq.LoadFrame(*frame_index, K));
+  const LocalizationResult refused = cold.Localize(seq.LoadFrame(frame_index, K));
   EXPECT_FALSE(refused.ok);
   EXPECT_NE(refused.message.find("poorly conditioned"), std::string::npos) << refused.message;
 }
@@ -578,18 +584,10 @@ TEST(Localizer, AKeypointRelocalisationWhoseDepthSeesThroughTheRoomsSurfaceIsRef
   options.use_markers = false;       // keypoints only
   options.use_room_surface = false;  // the surface only checks the pose here
   const Sequence seq = Sequence::Open(c.folder.room_dir);
-  std::optional<size_t> frame_index;
-  Rigid3d room_from_camera;
-  for (size_t i = 1; i < seq.size() && !frame_index; ++i) {
-    CameraLocalizer alone(GetSmallCaseMap().map, K, options);
-    const LocalizationResult r = alone.Localize(seq.LoadFrame(i, K));
-    if (r.ok && r.status == LocalizationStatus::kRelocalized) {
-      frame_index = i;
-      room_from_camera = r.room_from_camera;
-    }
-  }
-  ASSERT_TRUE(frame_index.has_value()) << "no frame localisable by keypoints alone";
-  const RgbdFrame frame = seq.LoadFrame(*frame_index, K);
+  const auto found = FirstRelocalisedFrame(seq, K, options);
+  ASSERT_TRUE(found.has_value()) << "no frame localisable by keypoints alone";
+  const Rigid3d room_from_camera = found->second.room_from_camera;
+  const RgbdFrame frame = seq.LoadFrame(found->first, K);
   auto with_surface_at = [&](double fraction, bool check = true) {
     RoomMap map = GetSmallCaseMap().map;
     map.surface = RoomSurface();
