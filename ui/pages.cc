@@ -424,14 +424,16 @@ void PlanningPage::ShowRoomMap(PlanId plan) {
                            .arg(worst.join(", ")));
   // How well the room frame is known where the patient lies: part of every
   // correction's bound in tracking (maps from before it was measured: none).
-  if (map->room_frame_couch_sigma_mm && map->room_frame_tilt_sigma_deg && map->room_frame_yaw_sigma_deg) {
-    plan_label_->setText(plan_label_->text() +
-                         tr("\nRoom frame at the couch (1 sigma, from the origin marker and the map between it and "
-                            "the couch): position %1 mm, tilt %2 deg, yaw %3 deg; tracking adds 3 times these to "
-                            "every correction's bound.")
-                             .arg(*map->room_frame_couch_sigma_mm, 0, 'f', 2)
-                             .arg(*map->room_frame_tilt_sigma_deg, 0, 'f', 3)
-                             .arg(*map->room_frame_yaw_sigma_deg, 0, 'f', 3));
+  if (map->room_frame_couch_sigma_mm && map->room_frame_tilt_sigma_deg &&
+      map->room_frame_yaw_sigma_deg) {
+    plan_label_->setText(
+        plan_label_->text() +
+        tr("\nRoom frame at the couch (1 sigma, from the origin marker and the map between it and "
+           "the couch): position %1 mm, tilt %2 deg, yaw %3 deg; tracking adds 3 times these to "
+           "every correction's bound.")
+            .arg(*map->room_frame_couch_sigma_mm, 0, 'f', 2)
+            .arg(*map->room_frame_tilt_sigma_deg, 0, 'f', 3)
+            .arg(*map->room_frame_yaw_sigma_deg, 0, 'f', 3));
   }
 }
 
