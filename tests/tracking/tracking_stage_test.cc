@@ -51,6 +51,12 @@ class TrackingStage : public ::testing::Test {
   }
   static void TearDownTestSuite() { fs::remove_all(root_); }
 
+  // The sample's stored session as tracking reads it.
+  static TrackingInputs SampleInputs() {
+    auto database = SqliteDatabase::Open(store_.string());
+    return LoadTrackingInputs(database.get(), std::nullopt, "case");
+  }
+
   // A sequence of the sample's first tracking frame in the given kinds, 1/30 s
   // apart (a gap frame comes 2 s after the previous one).
   static fs::path MakeSequence(const std::string& name, const std::vector<std::string>& kinds,
@@ -62,8 +68,7 @@ class TrackingStage : public ::testing::Test {
     // Every sticker painted over with the skin around it, where the true
     // poses put it.
     cv::Mat no_stickers = a.color.clone();
-    auto database = SqliteDatabase::Open(store_.string());
-    const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+    const TrackingInputs inputs = SampleInputs();
     const Rigid3d camera_from_model =
         sample.CameraGroundTruth()->front().room_from_x.Inverse() * sample.BodyGroundTruth()->front().room_from_x;
     int painted = 0;
@@ -254,8 +259,7 @@ fs::path TrackingStage::root_, TrackingStage::case_, TrackingStage::store_;
 TEST_F(TrackingStage, AHintAFewMillimetresOffFindsTheStickersWithoutArUco) {
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
-  auto database = SqliteDatabase::Open(store_.string());
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const TrackingInputs inputs = SampleInputs();
   TrackerOptions options = MakeTrackerOptions(config, inputs);
   options.body.detector.id_ranges = {{900, 950}};  // ArUco reads no sticker
   const Rigid3d truth =
@@ -291,8 +295,7 @@ TEST_F(TrackingStage, AHintAFewMillimetresOffFindsTheStickersWithoutArUco) {
 TEST_F(TrackingStage, StickersTheSurfaceContradictsAreNotReported) {
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
-  auto database = SqliteDatabase::Open(store_.string());
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const TrackingInputs inputs = SampleInputs();
   const TrackerOptions options = MakeTrackerOptions(config, inputs);
   const Rigid3d truth =
       sample.CameraGroundTruth()->front().room_from_x.Inverse() * sample.BodyGroundTruth()->front().room_from_x;
@@ -343,8 +346,7 @@ TEST_F(TrackingStage, StickersTooSmallToReadAreSaidToBe) {
   std::vector<double> stamps;
   const fs::path seq = MakeSequence("painted", {"no_stickers"}, &stamps);
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
-  auto database = SqliteDatabase::Open(store_.string());
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const TrackingInputs inputs = SampleInputs();
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
   const Rigid3d truth =
       sample.CameraGroundTruth()->front().room_from_x.Inverse() * sample.BodyGroundTruth()->front().room_from_x;
@@ -370,8 +372,7 @@ TEST_F(TrackingStage, StickersTooSmallToReadAreSaidToBe) {
 TEST_F(TrackingStage, AWarmUpLeavesTheTrackerAsConstructed) {
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
-  auto database = SqliteDatabase::Open(store_.string());
-  const TrackingInputs inputs = LoadTrackingInputs(database.get(), std::nullopt, "case");
+  const TrackingInputs inputs = SampleInputs();
   const TrackerOptions options = MakeTrackerOptions(config, inputs);
   auto make = [&] {
     return std::make_unique<Tracker>(inputs.room_map, inputs.model, inputs.model_from_marker,
