@@ -162,19 +162,25 @@ std::string SessionStageResult::Summary() const {
       "reconstruction: %d points from %d of %d frames%s (mean frame correction %.2f mm, %.3f deg "
       "taken off), mesh %d vertices\n"
       "alignment (%s, %s): fitness %.3f, rmse %.2f mm\n"
-      "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) deg\n"
+      "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) "
+      "deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
       "%.2f, store %.2f, total %.2f\n",
-      static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()),
-      frames, frames_considered, frames_localized, frames_posed_by_stickers, camera_response.c_str(),
-      marker_map.markers.size(), marker_map.mean_rms_px,
-      marker_map.rejected.size(),
-      stickers_on_surface
-          ? StringPrintf("placed from %d frames registered to the reconstruction", frames_registered_for_stickers).c_str()
-          : "from the sticker-consistent cameras",
-      reconstruction_points, reconstruction_frames_fused,
-      reconstruction_frames_offered,
-      reconstruction_frames_fused < reconstruction_frames_offered ? ", the others disagreed with it" : "",
+      static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()), frames,
+      frames_considered, frames_localized, frames_posed_by_stickers, camera_response.c_str(),
+      marker_map.markers.size(), marker_map.mean_rms_px, marker_map.rejected.size(),
+      stickers_on_surface ? StringPrintf("placed from %d frames registered to the reconstruction",
+                                         frames_registered_for_stickers)
+                                .c_str()
+                          : "from the sticker-consistent cameras",
+      reconstruction_points, reconstruction_frames_fused, reconstruction_frames_offered,
+      (reconstruction_frames_fused == reconstruction_frames_offered ? std::string()
+       : reconstruction_rebuilt ? StringPrintf(", the others disagreed with it (built from the "
+                                               "frame at %.3f s, the one most frames "
+                                               "agreed with)",
+                                               reconstruction_anchor_frame_s)
+                                : std::string(", the others disagreed with it"))
+          .c_str(),
       1000 * anchor_shift_m.norm(), anchor_rotation_deg, mesh_vertices, alignment_method.c_str(),
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
@@ -348,7 +354,6 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   recon_options.target_points = 5e5;
   recon_options.crop_box = BoxAroundModel(model, plan.room_from_model_target, 0.12);
   recon_options.num_threads = options.threads;
-  ReconstructionBuilder builder(recon_options);
   result.reconstruction_voxel_m = recon_options.output_voxel_m;
   DepthCloudOptions depth_options;
   depth_options.stride_px = camera.width > 800 ? 4 : 2;
@@ -513,26 +518,54 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   t0 = Clock::now();
   std::vector<StampedPose> camera_poses;
   Eigen::Vector3d camera_centre_sum = Eigen::Vector3d::Zero();
-  std::vector<size_t> recon_frame_of;  // the frame of each recon_reports entry
+  std::vector<size_t> recon_candidates;  // posed frames with a depth cloud, in time order
   for (size_t i = 0; i < frames.size(); ++i) {
     const ScanFrame& f = frames[i];
     if (!f.posed) continue;
     camera_poses.push_back({f.timestamp_s, f.view.room_from_camera});
     camera_centre_sum += f.view.room_from_camera.translation;
-    if (f.cloud) {
-      recon_reports.push_back(builder.AddFrame(*f.cloud, f.view.room_from_camera));
-      recon_frame_of.push_back(i);
-    }
+    if (f.cloud) recon_candidates.push_back(i);
   }
+  // A reconstruction follows its first frame: when most frames disagree with
+  // it, it is built again from the frames the room map placed most surely
+  // (up to three; their poses owe nothing to the stickers). Measured: a frame
+  // posed from two 16 px stickers 6.3 deg off started a scan whose five
+  // room-placed frames, 0.1-0.3 deg off, were all refused (model pose 24.7
+  // mm, 6.3 deg; built again from one of them: 2.9 mm, 0.12 deg).
+  std::vector<ReconstructionInput> recon_inputs;
+  std::vector<std::pair<double, size_t>> room_placed;  // (sigma at the isocentre, input)
+  for (size_t i : recon_candidates) {
+    const ScanFrame& f = frames[i];
+    if (f.localized && !f.by_stickers) {
+      const double distance_m =
+          (f.room_from_camera.translation - plan.room_from_model_target.translation).norm();
+      room_placed.push_back(
+          {FrameSigmaAtMm(f.pos_sigma_mm, f.rot_sigma_deg, distance_m), recon_inputs.size()});
+    }
+    recon_inputs.push_back({&*f.cloud, f.view.room_from_camera});
+  }
+  std::sort(room_placed.begin(), room_placed.end());
+  std::vector<size_t> alternatives;
+  for (size_t k = 0; k < std::min<size_t>(3, room_placed.size()); ++k)
+    alternatives.push_back(room_placed[k].second);
+  AnchoredReconstruction built =
+      BuildAnchoredReconstruction(recon_inputs, alternatives, recon_options);
+  std::unique_ptr<ReconstructionBuilder> builder = std::move(built.builder);
+  recon_reports = std::move(built.reports);
+  std::vector<size_t> recon_frame_of;  // the frame of each recon_reports entry
+  for (size_t k : built.order) recon_frame_of.push_back(recon_candidates[k]);
+  result.reconstruction_rebuilt = built.rebuilt;
+  if (!recon_candidates.empty())
+    result.reconstruction_anchor_frame_s = frames[recon_candidates[built.anchor]].timestamp_s;
   t_recon += SecondsSince(t0);
 
   // Couch and room removal: the couch top is the dominant plane facing the
   // cameras; keep what lies above it and its largest connected part.
   step("cropping the reconstruction to the body", 0.65);
   t0 = Clock::now();
-  result.reconstruction_frames_fused = builder.frames_fused();
-  result.reconstruction_frames_offered = builder.frames_used();
-  PointCloud fused = builder.Cloud();
+  result.reconstruction_frames_fused = builder->frames_fused();
+  result.reconstruction_frames_offered = builder->frames_used();
+  PointCloud fused = builder->Cloud();
   // GICP makes the frames consistent with the first one fused, so the
   // reconstruction carries that frame's localisation error. Each refined
   // frame's correction is (first frame's error) * (its own error)^-1; their
@@ -564,7 +597,8 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     std::vector<BodyScanView> views;
     for (ScanFrame& f : frames) {
       if (!f.posed || !f.sticker_cloud) continue;
-      const ReconstructionFrameReport r = builder.RegisterFrame(*f.sticker_cloud, f.view.room_from_camera);
+      const ReconstructionFrameReport r =
+          builder->RegisterFrame(*f.sticker_cloud, f.view.room_from_camera);
       f.sticker_cloud.reset();
       if (!r.refined) continue;
       f.surface_pose = anchor.Inverse() * r.world_from_camera;

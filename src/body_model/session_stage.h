@@ -213,6 +213,12 @@ struct SessionStageResult {
   /// Frames offered to the reconstruction and those fused (a frame whose
   /// GICP correction is refused is left out).
   int reconstruction_frames_offered = 0, reconstruction_frames_fused = 0;
+  /// Fewer than two thirds of the frames joined the reconstruction started
+  /// from the first one, so it was built again from the frames the room map
+  /// placed most surely; the build most frames joined was kept, started
+  /// from the frame at `reconstruction_anchor_frame_s`.
+  bool reconstruction_rebuilt = false;
+  double reconstruction_anchor_frame_s = 0;
   /// The fused body surface (room frame at scan time), as stored.
   PointCloud reconstruction;
   int mesh_vertices = 0;

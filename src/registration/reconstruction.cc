@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <memory>
 
 #include "geometry/so3.h"
 #include "registration/kdtree.h"
@@ -253,6 +254,43 @@ PointCloud ReconstructionBuilder::Cloud(int min_points_per_voxel) const {
     EstimateNormals(&cloud, tree, options);
   }
   return cloud;
+}
+
+AnchoredReconstruction BuildAnchoredReconstruction(const std::vector<ReconstructionInput>& inputs,
+                                                   const std::vector<size_t>& alternatives,
+                                                   const ReconstructionOptions& options,
+                                                   double min_joined_share) {
+  ARPOS_CHECK(min_joined_share >= 0 && min_joined_share <= 1, "min_joined_share must be in [0, 1]");
+  AnchoredReconstruction best;
+  auto build_from = [&](size_t first) {
+    ARPOS_CHECK(first < inputs.size(), "reconstruction anchor out of range");
+    AnchoredReconstruction b;
+    b.builder = std::make_unique<ReconstructionBuilder>(options);
+    b.anchor = first;
+    b.order.push_back(first);
+    for (size_t i = 0; i < inputs.size(); ++i) {
+      if (i != first) b.order.push_back(i);
+    }
+    for (size_t i : b.order) {
+      ARPOS_CHECK(inputs[i].cloud != nullptr, "reconstruction input without a cloud");
+      b.reports.push_back(b.builder->AddFrame(*inputs[i].cloud, inputs[i].world_from_camera));
+    }
+    if (!best.builder || b.builder->frames_fused() > best.builder->frames_fused())
+      best = std::move(b);
+  };
+  if (inputs.empty()) {
+    best.builder = std::make_unique<ReconstructionBuilder>(options);
+    return best;
+  }
+  build_from(0);
+  const double joined = best.builder->frames_fused();
+  if (inputs.size() >= 3 && joined < min_joined_share * static_cast<double>(inputs.size())) {
+    for (size_t i : alternatives) {
+      if (i != 0) build_from(i);
+    }
+    best.rebuilt = true;
+  }
+  return best;
 }
 
 }  // namespace arpos

@@ -137,4 +137,31 @@ class ReconstructionBuilder {
   int frames_fused_ = 0;
 };
 
+/// One frame offered to BuildAnchoredReconstruction.
+struct ReconstructionInput {
+  const PointCloud* cloud = nullptr;  ///< camera frame
+  Rigid3d world_from_camera;
+};
+
+struct AnchoredReconstruction {
+  std::unique_ptr<ReconstructionBuilder> builder;
+  std::vector<ReconstructionFrameReport> reports;  ///< build order: the anchor first
+  std::vector<size_t> order;                       ///< the input of each report
+  size_t anchor = 0;                               ///< the input it was built from
+  bool rebuilt = false;  ///< the first build left too many frames out; others were tried
+};
+
+/// A reconstruction follows its first frame (GICP registers the others to
+/// what is built), so one badly posed first frame makes the well posed ones
+/// "disagree" and be left out. Built from inputs[0] first, the others in
+/// their order; when fewer than `min_joined_share` of them join (and there
+/// are at least three), built again from each of `alternatives` (indices
+/// into `inputs`, tried in order: the frames posed most surely), and the
+/// build most frames join is kept (ties: the earlier). Every frame is
+/// offered, so use frame_stride 1. An empty `inputs` gives an empty builder.
+AnchoredReconstruction BuildAnchoredReconstruction(const std::vector<ReconstructionInput>& inputs,
+                                                   const std::vector<size_t>& alternatives,
+                                                   const ReconstructionOptions& options,
+                                                   double min_joined_share = 2.0 / 3.0);
+
 }  // namespace arpos

@@ -152,6 +152,60 @@ TEST(Reconstruction, FrameWithARefusedCorrectionIsNotFused) {
   }
 }
 
+// The reconstruction follows its first frame: one posed 6 deg and 4 cm off
+// makes the others disagree with it. Built again from the alternatives (the
+// frames posed most surely), the build most frames join is kept, and the
+// poses of those frames come back to the truth. Frames that agree are built
+// once, from the first.
+TEST(Reconstruction, ABadlyPosedFirstFrameDoesNotDecideTheReconstruction) {
+  const testing::CaseScenario& s = Views();
+  ReconstructionOptions options;
+  options.frame_stride = 1;
+  std::vector<ReconstructionInput> inputs;
+  for (const auto& f : s.frames) inputs.push_back({&f.body_in_camera, f.room_from_camera});
+  const AnchoredReconstruction agreeing = BuildAnchoredReconstruction(inputs, {2, 3}, options);
+  EXPECT_FALSE(agreeing.rebuilt);
+  EXPECT_EQ(agreeing.anchor, 0u);
+  EXPECT_EQ(agreeing.builder->frames_fused(), static_cast<int>(s.frames.size()));
+
+  const Eigen::Vector3d c0 = s.frames[0].room_from_camera * s.frames[0].body_in_camera.Centroid();
+  const Rigid3d turn = Rigid3d(
+      Eigen::Quaterniond(Eigen::AngleAxisd(RadFromDeg(6.0), Eigen::Vector3d(1, 1, 0).normalized())),
+      Eigen::Vector3d(0.04, 0, 0));
+  // Turned about the frame's own body centroid, then shifted.
+  const Rigid3d about_c0 = Rigid3d(Eigen::Quaterniond::Identity(), c0) * turn *
+                           Rigid3d(Eigen::Quaterniond::Identity(), -c0);
+  inputs[0].world_from_camera = about_c0 * s.frames[0].room_from_camera;
+  // Built from the bad frame alone, most frames are left out.
+  const AnchoredReconstruction first_only = BuildAnchoredReconstruction(inputs, {}, options);
+  EXPECT_TRUE(first_only.rebuilt);
+  EXPECT_EQ(first_only.anchor, 0u);
+  EXPECT_LT(3 * first_only.builder->frames_fused(), 2 * static_cast<int>(s.frames.size()));
+
+  const AnchoredReconstruction rebuilt = BuildAnchoredReconstruction(inputs, {2, 3}, options);
+  EXPECT_TRUE(rebuilt.rebuilt);
+  EXPECT_TRUE(rebuilt.anchor == 2 || rebuilt.anchor == 3) << rebuilt.anchor;
+  EXPECT_GE(rebuilt.builder->frames_fused(), static_cast<int>(s.frames.size()) - 1);
+  ASSERT_EQ(rebuilt.reports.size(), s.frames.size());
+  ASSERT_EQ(rebuilt.order.size(), s.frames.size());
+  EXPECT_EQ(rebuilt.order.front(), rebuilt.anchor);
+  for (size_t k = 0; k < rebuilt.reports.size(); ++k) {
+    const size_t i = rebuilt.order[k];
+    if (!rebuilt.reports[k].fused) {
+      EXPECT_EQ(i, 0u) << "only the badly posed frame may be left out";
+      continue;
+    }
+    const Eigen::Vector3d c = s.frames[i].body_in_camera.Centroid();
+    EXPECT_LT((rebuilt.reports[k].world_from_camera * c - s.frames[i].room_from_camera * c).norm(),
+              2e-3)
+        << "frame " << i;
+  }
+  // Nothing offered: an empty reconstruction.
+  const AnchoredReconstruction none = BuildAnchoredReconstruction({}, {}, options);
+  ASSERT_TRUE(none.builder);
+  EXPECT_EQ(none.builder->size(), 0u);
+}
+
 TEST(Reconstruction, StrideDynamicVoxelAndCrops) {
   const testing::CaseScenario& s = Views();
   ReconstructionOptions options;
