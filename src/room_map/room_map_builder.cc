@@ -675,8 +675,10 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   if (!origin_seen) {
     ARPOS_INPUT_ERROR(sequence.folder().string()
                       << ": the origin marker (id " << origin_id
-                      << ", case.yaml markers.room.origin_id) is never seen in the room sequence, so the "
-                         "room frame is undefined; record the room again with the origin marker in view");
+                      << ", case.yaml markers.room.origin_id) is never seen in the room sequence (not in view, "
+                         "or too small, oblique or blurred to be read in any frame), so the room frame is "
+                         "undefined; record the room again with the origin marker in view, close and sharp in a "
+                         "few frames (move the camera slowly past it)");
   }
   // The map is built in the frame of a root marker held fixed in the
   // adjustments: the origin marker when one of its views gives a clear
