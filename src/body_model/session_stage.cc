@@ -565,6 +565,19 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   t0 = Clock::now();
   result.reconstruction_frames_fused = builder->frames_fused();
   result.reconstruction_frames_offered = builder->frames_used();
+  if (result.reconstruction_frames_offered >= 3 &&
+      2 * result.reconstruction_frames_fused < result.reconstruction_frames_offered) {
+    result.warnings.push_back(StringPrintf(
+        "only %d of the %d body-scan frames offered to the reconstruction agree on the surface "
+        "(the others' poses "
+        "differ from it by more than %.0f mm or %.0f deg, or overlap it too little): the surface "
+        "covers less of the body and rests on "
+        "those frames; check the alignment, or record the scan again with the room markers beside "
+        "the couch "
+        "and the stickers in view",
+        result.reconstruction_frames_fused, result.reconstruction_frames_offered,
+        1000 * recon_options.max_correction_m, DegFromRad(recon_options.max_correction_rad)));
+  }
   PointCloud fused = builder->Cloud();
   // GICP makes the frames consistent with the first one fused, so the
   // reconstruction carries that frame's localisation error. Each refined
