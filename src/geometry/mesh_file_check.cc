@@ -97,7 +97,7 @@ double ReadBinaryFloat(const char* p, int size, bool big_endian) {
   return value;
 }
 
-void CheckPly(const fs::path& path, const std::string& data) {
+void CheckPly(const fs::path& path, const std::string& data, PlyContents* out) {
   const std::string name = path.string();
   const size_t header_end = data.find("end_header");
   if (data.compare(0, 3, "ply") != 0 || header_end == std::string::npos) {
@@ -171,8 +171,46 @@ void CheckPly(const fs::path& path, const std::string& data) {
   };
   for (const auto& e : elements) {
     const bool is_face = e.name == "face";
+    const bool is_vertex = e.name == "vertex";
+    // What is kept when reading: a vertex's x y z nx ny nz (slots 0-5), a
+    // face's index list ('vertex_indices', 'vertex_index', else the first
+    // integer list).
+    std::vector<int> slot(e.properties.size(), -1);
+    bool normals = false;
+    int face_list = -1;
+    if (out != nullptr && is_vertex) {
+      static const char* const kNames[] = {"x", "y", "z", "nx", "ny", "nz"};
+      int found = 0;
+      for (size_t k = 0; k < e.properties.size(); ++k) {
+        for (int j = 0; j < 6; ++j) {
+          if (!e.properties[k].is_list && e.properties[k].name == kNames[j])
+            slot[k] = j, found |= 1 << j;
+        }
+      }
+      if ((found & 7) != 7) ARPOS_INPUT_ERROR(name << ": PLY vertices lack x, y or z");
+      normals = (found & 56) == 56;
+      out->positions.reserve(e.count);
+      if (normals) out->normals.reserve(e.count);
+    }
+    if (out != nullptr && is_face) {
+      for (size_t k = 0; k < e.properties.size(); ++k) {
+        const PlyProperty& p = e.properties[k];
+        if (!p.is_list || p.value_float) continue;
+        if (p.name == "vertex_indices" || p.name == "vertex_index") {
+          face_list = static_cast<int>(k);
+          break;
+        }
+        if (face_list < 0) face_list = static_cast<int>(k);
+      }
+      out->faces.reserve(e.count);
+    }
+    double vertex[6] = {0, 0, 0, 0, 0, 0};
+    std::vector<int64_t> face;
     for (uint64_t n = 0; n < e.count; ++n) {
-      for (const auto& p : e.properties) {
+      face.clear();
+      for (size_t k = 0; k < e.properties.size(); ++k) {
+        const PlyProperty& p = e.properties[k];
+        const bool keep_index = static_cast<int>(k) == face_list;
         auto truncated = [&]() {
           ARPOS_INPUT_ERROR(name << ": PLY data ends early (truncated file?): header declares " << e.count
                                  << " " << e.name << " elements, the data stops in number " << n);
@@ -208,18 +246,20 @@ void CheckPly(const fs::path& path, const std::string& data) {
         const bool indices = is_face && p.is_list && !p.value_float;
         for (uint64_t i = 0; i < items; ++i) {
           int64_t index = 0;
+          double value = 0;
           if (binary) {
             if (pos + p.value_size > data.size()) truncated();
-            if (indices) index = ReadBinaryInt(data.data() + pos, p.value_size, p.value_signed, big);
             if (p.value_float) {
-              const double value = ReadBinaryFloat(data.data() + pos, p.value_size, big);
+              value = ReadBinaryFloat(data.data() + pos, p.value_size, big);
               if (!std::isfinite(value)) not_finite(value);
+            } else {
+              index = ReadBinaryInt(data.data() + pos, p.value_size, p.value_signed, big);
+              value = static_cast<double>(index);
             }
             pos += p.value_size;
           } else {
             const std::string token = next_token();
             if (token.empty()) truncated();
-            double value = 0;
             if (!ParseDouble(token, &value)) bad_number(token);
             index = static_cast<int64_t>(value);
           }
@@ -227,8 +267,15 @@ void CheckPly(const fs::path& path, const std::string& data) {
             ARPOS_INPUT_ERROR(name << ": PLY face " << n << " refers to vertex " << index << " of "
                                    << num_vertices);
           }
+          if (slot[k] >= 0) vertex[slot[k]] = value;
+          if (keep_index) face.push_back(index);
         }
       }
+      if (out != nullptr && is_vertex) {
+        out->positions.emplace_back(vertex[0], vertex[1], vertex[2]);
+        if (normals) out->normals.emplace_back(vertex[3], vertex[4], vertex[5]);
+      }
+      if (out != nullptr && is_face) out->faces.push_back(face);
     }
   }
 }
@@ -313,9 +360,17 @@ void CheckMeshFileStructure(const fs::path& path) {
   if (extension != ".ply" && extension != ".off" && extension != ".stl") return;
   const std::string data = ReadAll(path);
   if (data.empty()) ARPOS_INPUT_ERROR(path.string() << ": mesh file is empty");
-  if (extension == ".ply") CheckPly(path, data);
+  if (extension == ".ply") CheckPly(path, data, nullptr);
   if (extension == ".off") CheckOff(path, data);
   if (extension == ".stl") CheckStl(path, data);
+}
+
+PlyContents ReadPlyFile(const fs::path& path) {
+  const std::string data = ReadAll(path);
+  if (data.empty()) ARPOS_INPUT_ERROR(path.string() << ": mesh file is empty");
+  PlyContents out;
+  CheckPly(path, data, &out);
+  return out;
 }
 
 }  // namespace arpos

@@ -13,6 +13,7 @@
 
 #include "util/check.h"
 #include "util/file.h"
+#include "util/string_util.h"
 
 namespace arpos {
 namespace {
@@ -45,6 +46,61 @@ void AppendLE(std::string* out, const void* data, size_t n) {
   }
 }
 
+// A PLY file read by ReadPlyFile (mesh_file_check.h; assimp misreads some
+// binary ones), built as the assimp path builds a mesh: polygons as fans,
+// faces of fewer than three vertices and degenerate triangles dropped,
+// vertices no face uses left out, bit-identical positions merged unless
+// normals are kept.
+TriangleMesh MeshFromPly(const std::filesystem::path& path, const MeshLoadOptions& options) {
+  if (!options.only_group.empty()) {
+    ARPOS_INPUT_ERROR(path.string() << ": no group or mesh named '" << options.only_group
+                                    << "' (a PLY file holds one unnamed mesh)");
+  }
+  const PlyContents ply = ReadPlyFile(path);
+  const bool have_normals = options.keep_normals && !ply.normals.empty();
+  const float scale = static_cast<float>(options.units_scale);
+  TriangleMesh result;
+  // Vertices in the file's order, those no face uses left out.
+  std::vector<int> index_of(ply.positions.size(), -1);
+  for (const std::vector<int64_t>& face : ply.faces) {
+    if (face.size() < 3) continue;
+    for (int64_t v : face) index_of[static_cast<size_t>(v)] = 0;
+  }
+  std::map<std::tuple<float, float, float>, int> merged;
+  for (size_t v = 0; v < ply.positions.size(); ++v) {
+    if (index_of[v] < 0) continue;
+    const Eigen::Vector3f position = ply.positions[v].cast<float>() * scale;
+    if (!position.allFinite()) {
+      const Eigen::Vector3d& raw = ply.positions[v];
+      ARPOS_INPUT_ERROR(path.string()
+                        << ": vertex " << v << " is (" << raw.x() << ", " << raw.y() << ", "
+                        << raw.z() << ")" << (scale != 1.0f ? " in file units" : "")
+                        << ": coordinates must be finite numbers");
+    }
+    if (options.merge_identical_positions && !have_normals) {
+      const auto [it, inserted] =
+          merged.emplace(std::make_tuple(position.x(), position.y(), position.z()),
+                         static_cast<int>(result.vertices.size()));
+      if (inserted) result.vertices.push_back(position);
+      index_of[v] = it->second;
+    } else {
+      index_of[v] = static_cast<int>(result.vertices.size());
+      result.vertices.push_back(position);
+      if (have_normals) result.vertex_normals.push_back(ply.normals[v].cast<float>().normalized());
+    }
+  }
+  auto vertex = [&](int64_t v) { return index_of[static_cast<size_t>(v)]; };
+  for (const std::vector<int64_t>& face : ply.faces) {
+    for (size_t k = 1; k + 1 < face.size(); ++k) {
+      const Eigen::Vector3i tri(vertex(face[0]), vertex(face[k]), vertex(face[k + 1]));
+      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;
+      result.faces.push_back(tri);
+    }
+  }
+  if (result.faces.empty()) ARPOS_INPUT_ERROR(path.string() << ": mesh has no triangles");
+  return result;
+}
+
 }  // namespace
 
 TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadOptions& options) {
@@ -56,6 +112,7 @@ TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadO
     ARPOS_INPUT_ERROR(path.string() << ": units scale must be positive, got "
                                     << options.units_scale);
   }
+  if (ToLower(path.extension().string()) == ".ply") return MeshFromPly(path, options);
   // assimp 5.2 crashes or invents faces on some malformed files: refuse them first.
   CheckMeshFileStructure(path);
   Assimp::Importer importer;

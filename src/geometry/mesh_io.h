@@ -1,6 +1,8 @@
 #pragma once
-/// Triangle-mesh files: loading through assimp (PLY, STL, OBJ, OFF and the
-/// other formats assimp reads) and writing binary PLY.
+/// Triangle-mesh files: loading PLY with the project's reader
+/// (mesh_file_check.h: assimp 5.2.5 misreads binary PLY whose data starts
+/// with a whitespace byte) and everything else through assimp (STL, OBJ, OFF
+/// and the other formats it reads); writing binary PLY.
 ///
 /// Units: files store whatever unit their author chose; `units_scale` converts
 /// to metres on load (1 for metres, 0.001 for millimetres, 0.1 for MakeHuman
@@ -27,7 +29,8 @@ struct MeshLoadOptions {
   bool keep_normals = false;
 };
 
-/// Loads a mesh with aiProcess_Triangulate | aiProcess_JoinIdenticalVertices.
+/// Loads a mesh with aiProcess_Triangulate | aiProcess_JoinIdenticalVertices
+/// (PLY: read directly, polygons as fans, vertices no face uses left out).
 /// Every mesh of the scene (or of the selected group) is concatenated in
 /// scene-graph order with its node transforms applied. Faces keep the file's
 /// winding. Throws InputError naming the file if it is missing, unreadable,

@@ -1,6 +1,9 @@
 // Length units (stated and detected) and mesh files through ImportModel.
 #include <gtest/gtest.h>
 
+#include <cstdint>
+#include <cstring>
+
 #include "geometry/mesh_io.h"
 #include "model_import/model_import.h"
 #include "model_import/test_util.h"
@@ -168,6 +171,70 @@ TEST(MeshImport, MakeHumanObjInDecimetresIsABodyOfHumanHeight) {
   EXPECT_TRUE(body.summary.closed);
   EXPECT_GT(body.summary.signed_volume, 0.03);  // tens of litres
   EXPECT_LT(body.summary.signed_volume, 0.12);
+}
+
+// PLY is read by the project's reader: assimp 5.2.5 skips whitespace after
+// end_header and misread (then segfaulted on) a binary file whose first data
+// byte was 0x0a. Each whitespace byte first, both byte orders, ASCII with a
+// quad, an unused vertex and normals: the mesh comes back as written.
+TEST(MeshImport, PlyFilesAreReadWhateverTheirFirstDataByte) {
+  TempDir dir;
+  const TriangleMesh torso = Torso();
+  for (const uint8_t first : {0x09, 0x0a, 0x0b, 0x0c, 0x0d, 0x20, 0x41}) {
+    TriangleMesh mesh = torso;
+    uint32_t bits = 0;
+    std::memcpy(&bits, &mesh.vertices[0].x(), 4);
+    bits = (bits & 0xffffff00u) | first;  // little endian: the low byte is written first
+    std::memcpy(&mesh.vertices[0].x(), &bits, 4);
+    const fs::path path = dir.path() / ("first_" + std::to_string(first) + ".ply");
+    SaveTriangleMeshPly(mesh, path);
+    const std::string bytes = test::ReadBytes(path);
+    ASSERT_EQ(static_cast<uint8_t>(bytes[bytes.find("end_header\n") + 11]), first);
+    const TriangleMesh read = LoadTriangleMesh(path);
+    ASSERT_EQ(read.vertices.size(), mesh.vertices.size()) << int(first);
+    ASSERT_EQ(read.faces.size(), mesh.faces.size()) << int(first);
+    for (size_t f = 0; f < mesh.faces.size(); ++f) {
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_EQ(read.vertices[read.faces[f][k]], mesh.vertices[mesh.faces[f][k]])
+            << int(first) << " face " << f;
+      }
+    }
+  }
+  // Big endian, double coordinates, one triangle.
+  std::string big =
+      "ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+      "property double z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  auto put_be = [&big](const void* p, int n) {
+    for (int b = n - 1; b >= 0; --b) big.push_back(static_cast<const char*>(p)[b]);
+  };
+  const double xyz[9] = {0, 0, 0, 0.5, 0, 0, 0, 0.25, 0};
+  for (double v : xyz) put_be(&v, 8);
+  big.push_back(3);
+  for (int32_t i : {0, 1, 2}) put_be(&i, 4);
+  test::WriteBytes(dir.path() / "big.ply", big);
+  const TriangleMesh b = LoadTriangleMesh(dir.path() / "big.ply");
+  ASSERT_EQ(b.faces.size(), 1u);
+  EXPECT_EQ(b.vertices[b.faces[0][1]], Eigen::Vector3f(0.5f, 0, 0));
+  EXPECT_EQ(b.vertices[b.faces[0][2]], Eigen::Vector3f(0, 0.25f, 0));
+  // ASCII: a quad (two triangles), a vertex no face uses, normals kept on
+  // request, millimetres scaled.
+  test::WriteBytes(
+      dir.path() / "quad.ply",
+      "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n"
+      "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+      "element face 1\nproperty list uchar int vertex_index\nend_header\n"
+      "0 0 0 0 0 2\n1000 0 0 0 0 1\n1000 1000 0 0 0 1\n0 1000 0 0 0 1\n9 9 9 1 0 0\n4 0 1 2 3\n");
+  MeshLoadOptions options;
+  options.units_scale = 0.001;
+  options.keep_normals = true;
+  const TriangleMesh quad = LoadTriangleMesh(dir.path() / "quad.ply", options);
+  EXPECT_EQ(quad.vertices.size(), 4u);
+  ASSERT_EQ(quad.faces.size(), 2u);
+  ASSERT_EQ(quad.vertex_normals.size(), 4u);
+  EXPECT_EQ(quad.vertex_normals[quad.faces[0][0]], Eigen::Vector3f(0, 0, 1));  // normalised
+  EXPECT_EQ(quad.vertices[quad.faces[1][2]], Eigen::Vector3f(0, 1, 0));
+  options.keep_normals = false;
+  EXPECT_TRUE(LoadTriangleMesh(dir.path() / "quad.ply", options).vertex_normals.empty());
 }
 
 TEST(MeshImport, BadMeshFilesAreRefusedNamingTheFile) {
