@@ -569,12 +569,10 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       2 * result.reconstruction_frames_fused < result.reconstruction_frames_offered) {
     result.warnings.push_back(StringPrintf(
         "only %d of the %d body-scan frames offered to the reconstruction agree on the surface "
-        "(the others' poses "
-        "differ from it by more than %.0f mm or %.0f deg, or overlap it too little): the surface "
-        "covers less of the body and rests on "
-        "those frames; check the alignment, or record the scan again with the room markers beside "
-        "the couch "
-        "and the stickers in view",
+        "(the "
+        "others' poses differ from it by more than %.0f mm or %.0f deg, or overlap it too little): "
+        "the surface covers less of the body and rests on those frames; check the alignment, or "
+        "record the scan again with the room markers beside the couch and the stickers in view",
         result.reconstruction_frames_fused, result.reconstruction_frames_offered,
         1000 * recon_options.max_correction_m, DegFromRad(recon_options.max_correction_rad)));
   }

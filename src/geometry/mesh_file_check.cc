@@ -202,12 +202,12 @@ void CheckPly(const fs::path& path, const std::string& data, PlyContents* out) {
         }
         if (face_list < 0) face_list = static_cast<int>(k);
       }
-      out->faces.reserve(e.count);
+      out->face_sizes.reserve(e.count);
+      out->face_indices.reserve(3 * e.count);
     }
     double vertex[6] = {0, 0, 0, 0, 0, 0};
-    std::vector<int64_t> face;
     for (uint64_t n = 0; n < e.count; ++n) {
-      face.clear();
+      uint32_t face_size = 0;
       for (size_t k = 0; k < e.properties.size(); ++k) {
         const PlyProperty& p = e.properties[k];
         const bool keep_index = static_cast<int>(k) == face_list;
@@ -268,14 +268,14 @@ void CheckPly(const fs::path& path, const std::string& data, PlyContents* out) {
                                    << num_vertices);
           }
           if (slot[k] >= 0) vertex[slot[k]] = value;
-          if (keep_index) face.push_back(index);
+          if (keep_index && out != nullptr) out->face_indices.push_back(index), ++face_size;
         }
       }
       if (out != nullptr && is_vertex) {
         out->positions.emplace_back(vertex[0], vertex[1], vertex[2]);
         if (normals) out->normals.emplace_back(vertex[3], vertex[4], vertex[5]);
       }
-      if (out != nullptr && is_face) out->faces.push_back(face);
+      if (out != nullptr && is_face) out->face_sizes.push_back(face_size);
     }
   }
 }

@@ -31,9 +31,11 @@ struct PlyContents {
   std::vector<Eigen::Vector3d> positions;
   /// Empty unless the vertices have nx, ny and nz.
   std::vector<Eigen::Vector3d> normals;
-  /// Vertex indices of each face (its 'vertex_indices' or 'vertex_index'
-  /// list, else its first integer list; empty without a face element).
-  std::vector<std::vector<int64_t>> faces;
+  /// Each face's vertex indices (its 'vertex_indices' or 'vertex_index'
+  /// list, else its first integer list), one face after the other; face f
+  /// has face_sizes[f] of them. Empty without a face element.
+  std::vector<int64_t> face_indices;
+  std::vector<uint32_t> face_sizes;
 };
 
 /// Reads a PLY file (ASCII or binary, either byte order) with the checks of

@@ -62,9 +62,10 @@ TriangleMesh MeshFromPly(const std::filesystem::path& path, const MeshLoadOption
   TriangleMesh result;
   // Vertices in the file's order, those no face uses left out.
   std::vector<int> index_of(ply.positions.size(), -1);
-  for (const std::vector<int64_t>& face : ply.faces) {
-    if (face.size() < 3) continue;
-    for (int64_t v : face) index_of[static_cast<size_t>(v)] = 0;
+  for (size_t f = 0, start = 0; f < ply.face_sizes.size(); start += ply.face_sizes[f++]) {
+    if (ply.face_sizes[f] < 3) continue;
+    for (size_t k = 0; k < ply.face_sizes[f]; ++k)
+      index_of[static_cast<size_t>(ply.face_indices[start + k])] = 0;
   }
   std::map<std::tuple<float, float, float>, int> merged;
   for (size_t v = 0; v < ply.positions.size(); ++v) {
@@ -89,10 +90,10 @@ TriangleMesh MeshFromPly(const std::filesystem::path& path, const MeshLoadOption
       if (have_normals) result.vertex_normals.push_back(ply.normals[v].cast<float>().normalized());
     }
   }
-  auto vertex = [&](int64_t v) { return index_of[static_cast<size_t>(v)]; };
-  for (const std::vector<int64_t>& face : ply.faces) {
-    for (size_t k = 1; k + 1 < face.size(); ++k) {
-      const Eigen::Vector3i tri(vertex(face[0]), vertex(face[k]), vertex(face[k + 1]));
+  auto vertex = [&](size_t i) { return index_of[static_cast<size_t>(ply.face_indices[i])]; };
+  for (size_t f = 0, start = 0; f < ply.face_sizes.size(); start += ply.face_sizes[f++]) {
+    for (size_t k = 1; k + 1 < ply.face_sizes[f]; ++k) {
+      const Eigen::Vector3i tri(vertex(start), vertex(start + k), vertex(start + k + 1));
       if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;
       result.faces.push_back(tri);
     }
