@@ -195,6 +195,19 @@ std::string TrackSequenceResult::Summary() const {
   if (dropped) out << StringPrintf("; %d of %d camera frames dropped (the tracker too far behind)", dropped, sequence_frames);
   out << StringPrintf("; %.1f ms per frame (p95 %.1f, max %.1f)", mean_total_ms, p95_total_ms, max_total_ms);
   if (frames) out << "\n  last correction: " << DescribeCorrection(last_correction);
+  // The commonest reason, when it cost a tenth of the frames or more, with
+  // what to do about it.
+  size_t worst = 0;
+  for (size_t k = 1; k < lost_by_cause.size(); ++k) {
+    if (lost_by_cause[k] > lost_by_cause[worst]) worst = k;
+  }
+  if (worst != 0 && frames > 0 && 10 * lost_by_cause[worst] >= frames) {
+    std::string what = TrackingLossHeadline(static_cast<TrackingLoss>(worst));
+    std::transform(what.begin(), what.end(), what.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    out << StringPrintf("\n  %d of %d frames lost as \"%s\": %s", lost_by_cause[worst], frames,
+                        what.c_str(), TrackingLossAdvice(static_cast<TrackingLoss>(worst)));
+  }
   if (room_frame.blocks_in) out << "\n  " << room_frame.text;
   return out.str();
 }

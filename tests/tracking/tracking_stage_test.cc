@@ -256,6 +256,31 @@ fs::path TrackingStage::root_, TrackingStage::case_, TrackingStage::store_;
 // refinement's reach, by the search over shifts across the view: measured on
 // a `--hard` case, whose first 10 frames were lost without it) and the
 // patient is tracked from them, near the truth, with the search on or off.
+// A run that lost many frames for one reason says which, and what to do; a
+// few lost frames are only counted.
+TEST(TrackingStageSummary, TheCommonestLossIsNamedWithWhatToDo) {
+  TrackSequenceResult run;
+  run.name = "seq_00";
+  run.frames = run.sequence_frames = 150;
+  run.lost = 150;
+  run.lost_by_cause[static_cast<size_t>(TrackingLoss::kCamera)] = 148;
+  run.lost_by_cause[static_cast<size_t>(TrackingLoss::kCameraAndPatient)] = 2;
+  const std::string summary = run.Summary();
+  EXPECT_NE(summary.find("148 of 150 frames lost as \"camera not placed in room\": " +
+                         std::string(TrackingLossAdvice(TrackingLoss::kCamera))),
+            std::string::npos)
+      << summary;
+  TrackSequenceResult few = run;
+  few.lost = 14;
+  few.tracked = 136;
+  few.lost_by_cause = {};
+  few.lost_by_cause[static_cast<size_t>(TrackingLoss::kPatient)] = 14;
+  EXPECT_EQ(few.Summary().find("frames lost as"), std::string::npos) << few.Summary();
+  few.lost_by_cause[static_cast<size_t>(TrackingLoss::kPatient)] = 15;
+  EXPECT_NE(few.Summary().find("15 of 150 frames lost as \"patient not found\""), std::string::npos)
+      << few.Summary();
+}
+
 TEST_F(TrackingStage, AHintAFewMillimetresOffFindsTheStickersWithoutArUco) {
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
