@@ -10,6 +10,7 @@
 #include <QLineEdit>
 #include <QMessageBox>
 #include <QPushButton>
+#include <QScrollArea>
 #include <QSet>
 #include <QSplitter>
 #include <QTableWidget>
@@ -145,7 +146,14 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   detail_layout->addWidget(detail_title_);
   detail_layout->addWidget(model_view_, 3);
   detail_layout->addWidget(run_plot_, 3);
-  detail_layout->addWidget(detail_text_, 1);
+  // The text scrolls: a run's summary and notes can outgrow the panel, and a
+  // label sized to all of its text squeezed the plot and ran off the bottom.
+  auto* detail_scroll = new QScrollArea(detail_panel);
+  detail_scroll->setObjectName("audit_detail_scroll");
+  detail_scroll->setWidgetResizable(true);
+  detail_scroll->setFrameShape(QFrame::NoFrame);
+  detail_scroll->setWidget(detail_text_);
+  detail_layout->addWidget(detail_scroll, 2);
 
   auto* splitter = new QSplitter(Qt::Horizontal, this);
   splitter->addWidget(tree_);
