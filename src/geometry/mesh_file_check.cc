@@ -268,7 +268,7 @@ void CheckPly(const fs::path& path, const std::string& data, PlyContents* out) {
                                    << num_vertices);
           }
           if (slot[k] >= 0) vertex[slot[k]] = value;
-          if (keep_index && out != nullptr) out->face_indices.push_back(index), ++face_size;
+          if (keep_index) out->face_indices.push_back(index), ++face_size;  // only when reading
         }
       }
       if (out != nullptr && is_vertex) {

@@ -294,20 +294,16 @@ struct RoomMapBuildReport {
   double map_couch_covariance_s = 0;
   /// The larger of the two: how well the couch's position in the room
   /// frame is known (what the plan stores and tracking adds to its bounds).
-  double CouchSigmaMm() const {
-    return std::isfinite(map_couch_sigma_mm) ? std::max(room_frame_couch_sigma_mm, map_couch_sigma_mm)
-                                             : room_frame_couch_sigma_mm;
-  }
+  double CouchSigmaMm() const { return LargerWhereComputed(room_frame_couch_sigma_mm, map_couch_sigma_mm); }
   /// The same for the orientation: the larger of the origin's own tilt
   /// (yaw) and the map's near the couch relative to it (what the plan
   /// stores and tracking adds to its rotation bounds).
-  double CouchTiltSigmaDeg() const {
-    return std::isfinite(map_couch_tilt_sigma_deg) ? std::max(room_frame_tilt_sigma_deg, map_couch_tilt_sigma_deg)
-                                                   : room_frame_tilt_sigma_deg;
-  }
-  double CouchYawSigmaDeg() const {
-    return std::isfinite(map_couch_yaw_sigma_deg) ? std::max(room_frame_yaw_sigma_deg, map_couch_yaw_sigma_deg)
-                                                  : room_frame_yaw_sigma_deg;
+  double CouchTiltSigmaDeg() const { return LargerWhereComputed(room_frame_tilt_sigma_deg, map_couch_tilt_sigma_deg); }
+  double CouchYawSigmaDeg() const { return LargerWhereComputed(room_frame_yaw_sigma_deg, map_couch_yaw_sigma_deg); }
+  /// `own` (the origin's), or `near_couch` (the map's) when it was computed
+  /// (finite) and larger.
+  static double LargerWhereComputed(double own, double near_couch) {
+    return std::isfinite(near_couch) ? std::max(own, near_couch) : own;
   }
   /// 1-sigma position error (mm) the room frame's uncertainty gives at a point.
   double RoomFramePositionSigmaMm(const Eigen::Vector3d& point_in_room) const;
