@@ -43,6 +43,10 @@ std::string KeypointOptions::Validate() const {
   else if (border_px < 19) out << "border_px must be at least 19 (ORB patch), got " << border_px;
   else if (!(max_depth_relative_span > 0)) out << "max_depth_relative_span must be positive";
   else if (!(min_depth_m >= 0 && max_depth_m > min_depth_m)) out << "depth range is empty";
+  else if (!(max_contrast_gain >= 1))
+    out << "max_contrast_gain must be at least 1, got " << max_contrast_gain;
+  else if (!(contrast_percentile >= 0 && contrast_percentile < 50))
+    out << "contrast_percentile must be in [0, 50), got " << contrast_percentile;
   return out.str();
 }
 
@@ -114,10 +118,45 @@ KeypointExtractor::KeypointExtractor(const KeypointOptions& options) : options_(
   }
 }
 
-void KeypointExtractor::Extract(const cv::Mat& gray, const cv::Mat& depth, double depth_scale,
+namespace {
+
+// `gray` with the grey levels between its `percentile` and 100 - `percentile`
+// percentiles stretched to 0-255, by at most `max_gain`; `gray` itself when
+// that would change little.
+const cv::Mat& StretchContrast(const cv::Mat& gray, double percentile, double max_gain,
+                               cv::Mat* buffer) {
+  if (!(max_gain > 1) || gray.empty()) return gray;
+  // Every 4th pixel of every 4th row of a 640x480 or larger image (0.05 ms
+  // where the whole image took 0.6 ms at 1280x720).
+  const int step = gray.cols >= 640 && gray.rows >= 480 ? 4 : 1;
+  int histogram[256] = {0};
+  double total = 0;
+  for (int r = 0; r < gray.rows; r += step) {
+    const std::uint8_t* row = gray.ptr<std::uint8_t>(r);
+    for (int c = 0; c < gray.cols; c += step) ++histogram[row[c]], ++total;
+  }
+  const double cut = total * percentile / 100.0;
+  int lo = 0, hi = 255;
+  for (double below = 0; lo < 255 && below + histogram[lo] <= cut; ++lo) below += histogram[lo];
+  for (double above = 0; hi > 0 && above + histogram[hi] <= cut; --hi) above += histogram[hi];
+  if (hi <= lo) return gray;
+  const double gain = std::min(max_gain, 255.0 / (hi - lo));
+  if (gain < 1.1) return gray;
+  // Centred on the range kept, so a capped gain does not clip one end.
+  const double offset = 127.5 - gain * 0.5 * (lo + hi);
+  gray.convertTo(*buffer, CV_8U, gain, offset);
+  return *buffer;
+}
+
+}  // namespace
+
+void KeypointExtractor::Extract(const cv::Mat& input_gray, const cv::Mat& depth, double depth_scale,
                                 KeypointSet* out) {
   ARPOS_CHECK(out != nullptr, "Extract needs an output set");
-  ARPOS_CHECK(gray.type() == CV_8UC1, "keypoints need an 8-bit grey image, got type " << gray.type());
+  ARPOS_CHECK(input_gray.type() == CV_8UC1,
+              "keypoints need an 8-bit grey image, got type " << input_gray.type());
+  const cv::Mat& gray = StretchContrast(input_gray, options_.contrast_percentile,
+                                        options_.max_contrast_gain, &stretched_);
   ARPOS_CHECK(depth.empty() || (depth.type() == CV_16UC1 && depth.size() == gray.size()),
               "depth must be CV_16UC1 of the image's size");
   out->clear();

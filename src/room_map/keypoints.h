@@ -45,6 +45,16 @@ struct KeypointOptions {
   int subpixel_half_window_px = 2;
   double min_depth_m = 0.2;
   double max_depth_m = 8.0;
+  /// FAST thresholds are grey-level differences: an underexposed image (a
+  /// camera with a linear response, auto exposure set by a window) puts the
+  /// room in a few dozen grey levels, where they find few corners. The grey
+  /// levels between the image's `contrast_percentile` and
+  /// 100 - `contrast_percentile` percentiles are stretched to 0-255 first,
+  /// by at most `max_contrast_gain` (noise is stretched too). ORB
+  /// descriptors compare intensities and are unchanged by the stretch up to
+  /// rounding, so maps built without it still match. 1: off.
+  double max_contrast_gain = 4.0;
+  double contrast_percentile = 1.0;
 
   std::string Validate() const;
   bool Check(std::string* reason = nullptr) const;
@@ -93,6 +103,7 @@ class KeypointExtractor {
   std::vector<std::vector<int>> cells_;
   std::vector<int> umax_;
   std::vector<cv::Point2f> points_;
+  cv::Mat stretched_;
 };
 
 /// The nearest and second-nearest of descriptors offered one by one (for the

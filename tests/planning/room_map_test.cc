@@ -4,6 +4,7 @@
 #include <random>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
 #include "planning/planning_test_util.h"
 #include "room_map/keypoints.h"
@@ -69,6 +70,61 @@ TEST(Keypoints, NearestTwoKeepsTheSmallestTwoDistancesWhateverTheOrder) {
   one.Offer(9, 100);
   EXPECT_EQ(one.best, 9);
   EXPECT_EQ(one.d2, 257);  // no second: the ratio test cannot reject
+}
+
+// An underexposed image (the view in grey levels 4-60: a linear camera
+// response, an exposure set by a bright window) gives many of the keypoints
+// of the same view well exposed, with the same descriptors; without the
+// contrast stretch FAST finds few. A well-exposed image is left as it is.
+TEST(Keypoints, AnUnderexposedImageGivesTheKeypointsOfAWellExposedOne) {
+  cv::RNG rng(11);
+  cv::Mat coarse(30, 40, CV_8UC1), fine(120, 160, CV_8UC1), a, b, bright;
+  rng.fill(coarse, cv::RNG::UNIFORM, 0, 256);
+  rng.fill(fine, cv::RNG::UNIFORM, 0, 256);
+  cv::resize(coarse, a, cv::Size(640, 480), 0, 0, cv::INTER_NEAREST);
+  cv::resize(fine, b, cv::Size(640, 480), 0, 0, cv::INTER_NEAREST);
+  cv::addWeighted(a, 0.6, b, 0.4, 0, bright);
+  cv::GaussianBlur(bright, bright, cv::Size(9, 9), 2.0);
+  cv::equalizeHist(bright, bright);  // every grey level used: well exposed
+  cv::Mat dark;
+  bright.convertTo(dark, CV_8U, 56.0 / 255.0, 4.0);
+  KeypointOptions on;
+  on.max_keypoints = 20000;  // counted, not capped
+  KeypointOptions off = on;
+  off.max_contrast_gain = 1.0;
+  ASSERT_TRUE(on.Check());
+  ASSERT_TRUE(off.Check());
+  KeypointSet well, dark_on, dark_off, well_off;
+  KeypointExtractor(on).Extract(bright, cv::Mat(), 1000, &well);
+  KeypointExtractor(on).Extract(dark, cv::Mat(), 1000, &dark_on);
+  KeypointExtractor(off).Extract(dark, cv::Mat(), 1000, &dark_off);
+  KeypointExtractor(off).Extract(bright, cv::Mat(), 1000, &well_off);
+  ASSERT_GT(well.size(), 300u);
+  // Left as it is when well exposed.
+  ASSERT_EQ(well_off.size(), well.size());
+  for (size_t i = 0; i < well.size(); ++i)
+    ASSERT_EQ(well.keypoints[i].pt, well_off.keypoints[i].pt);
+  // Measured: 4138 well exposed, 2084 dark with the stretch (56 grey levels
+  // hold less than 256), 652 without.
+  EXPECT_LT(dark_off.size(), 0.25 * well.size()) << "FAST on the dark image alone";
+  EXPECT_GT(dark_on.size(), 0.4 * well.size());
+  EXPECT_GT(dark_on.size(), 2.5 * dark_off.size());
+  // The same corners with (nearly) the same descriptors.
+  int same = 0;
+  for (size_t i = 0; i < dark_on.size(); ++i) {
+    for (size_t j = 0; j < well.size(); ++j) {
+      if (cv::norm(dark_on.keypoints[i].pt - well.keypoints[j].pt) > 0.5) continue;
+      if (HammingDistance32(dark_on.descriptors.ptr<std::uint8_t>(static_cast<int>(i)),
+                            well.descriptors.ptr<std::uint8_t>(static_cast<int>(j))) <= 30) {
+        ++same;
+      }
+      break;
+    }
+  }
+  EXPECT_GT(same, 0.75 * dark_on.size()) << same << " of " << dark_on.size();
+  KeypointOptions bad = on;
+  bad.max_contrast_gain = 0.5;
+  EXPECT_FALSE(bad.Check());
 }
 
 // The surface index finds a point of the face near a query beside it, and
