@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "util/check.h"
+#include "util/logging.h"
 #include "util/string_util.h"
 
 namespace arpos {
@@ -257,6 +258,17 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     return out;
   }
   out.timings.camera = out.camera.timings;
+  ARPOS_DEBUG(
+      "camera frame " << frame.index << ": "
+                      << (out.camera.ok ? LocalizationStatusName(out.camera.status) : "lost")
+                      << ", " << out.camera.markers_used << " markers, "
+                      << out.camera.keypoints_used << " keypoints, rms " << out.camera.rms_px
+                      << " px, sigma " << out.camera.position_sigma_mm << " mm "
+                      << out.camera.rotation_sigma_deg << " deg"
+                      << (out.camera.followed ? ", followed" : "")
+                      << (out.camera.unconfirmed ? ", unconfirmed" : "")
+                      << (out.camera.held_by_depth ? ", held by depth" : "")
+                      << (out.camera.message.empty() ? "" : " (" + out.camera.message + ")"));
   if (out.camera.ok) {
     last_room_from_camera_ = out.camera.room_from_camera;
     last_camera_t_ = frame.timestamp_s;

@@ -10,6 +10,8 @@
 #include <random>
 #include <sstream>
 
+#include <set>
+
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -57,24 +59,21 @@ class TrackingStage : public ::testing::Test {
     return LoadTrackingInputs(database.get(), std::nullopt, "case");
   }
 
-  // A sequence of the sample's first tracking frame in the given kinds, 1/30 s
-  // apart (a gap frame comes 2 s after the previous one).
-  static fs::path MakeSequence(const std::string& name, const std::vector<std::string>& kinds,
-                               std::vector<double>* stamps) {
-    const fs::path src = case_ / "tracking" / "seq_00";
+  // The sample's first tracking frame `a` with every sticker facing the
+  // camera but those in `keep` painted over with the skin around it, where
+  // the true poses put it; `painted` counts them.
+  static cv::Mat PaintStickers(const RgbdFrame& a, const std::set<int>& keep, int* painted) {
     const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
-    const Sequence sample = Sequence::Open(src);
-    const RgbdFrame a = sample.LoadFrame(0, config.camera);
-    // Every sticker painted over with the skin around it, where the true
-    // poses put it.
-    cv::Mat no_stickers = a.color.clone();
+    const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
     const TrackingInputs inputs = SampleInputs();
     const Rigid3d camera_from_model =
         sample.CameraGroundTruth()->front().room_from_x.Inverse() * sample.BodyGroundTruth()->front().room_from_x;
-    int painted = 0;
+    cv::Mat out = a.color.clone();
+    *painted = 0;
     for (const auto& [id, model_from_sticker] : inputs.model_from_marker) {
       const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
       if ((camera_from_sticker.rotation * Eigen::Vector3d::UnitZ()).dot(camera_from_sticker.translation) > 0) continue;
+      if (keep.count(id)) continue;
       std::vector<Eigen::Vector2d> corners;
       Eigen::Vector2d centre = Eigen::Vector2d::Zero();
       for (const auto& c : MarkerCornersInMarker(inputs.sticker_size_m)) {
@@ -89,9 +88,25 @@ class TrackingStage : public ::testing::Test {
       const Eigen::Vector2d q = centre + 2.5 * (corners[0] - centre);
       const cv::Vec3b skin = a.color.at<cv::Vec3b>(std::clamp(static_cast<int>(q.y()), 0, a.color.rows - 1),
                                                    std::clamp(static_cast<int>(q.x()), 0, a.color.cols - 1));
-      cv::fillConvexPoly(no_stickers, poly, cv::Scalar(skin[0], skin[1], skin[2]));
-      ++painted;
+      cv::fillConvexPoly(out, poly, cv::Scalar(skin[0], skin[1], skin[2]));
+      ++*painted;
     }
+    return out;
+  }
+
+  // A sequence of the sample's first tracking frame in the given kinds, 1/30 s
+  // apart (a gap frame comes 2 s after the previous one).
+  static fs::path MakeSequence(const std::string& name, const std::vector<std::string>& kinds,
+                               std::vector<double>* stamps) {
+    const fs::path src = case_ / "tracking" / "seq_00";
+    const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+    const Sequence sample = Sequence::Open(src);
+    const RgbdFrame a = sample.LoadFrame(0, config.camera);
+    const TrackingInputs inputs = SampleInputs();
+    const Rigid3d camera_from_model = sample.CameraGroundTruth()->front().room_from_x.Inverse() *
+                                      sample.BodyGroundTruth()->front().room_from_x;
+    int painted = 0;
+    const cv::Mat no_stickers = PaintStickers(a, {}, &painted);
     EXPECT_GE(painted, 2) << "the sample's first tracking frame should show stickers";
     // The room hidden: every pixel whose depth is not on the patient (inside
     // the reference model's box, and in front of its back, where the couch
@@ -359,6 +374,78 @@ TEST_F(TrackingStage, StickersTheSurfaceContradictsAreNotReported) {
   EXPECT_GE(r.sticker_ids.size(), 2u) << r.message;
   EXPECT_LT(r.depth_inlier_fraction, options.body.min_depth_inlier_fraction_with_stickers);
   EXPECT_NE(r.message.find("disagrees with the surface in depth"), std::string::npos) << r.message;
+}
+
+// A sticker the session placed wrongly in the model (under blur and a
+// sharpening camera: measured 2-3 mm off on an l515 case), read alone: it
+// disagrees with the surface and is dropped, and the frame is carried on the
+// surface from the prediction as a frame without stickers is, said so, not
+// lost (that case: 36 of 150 frames lost). Here one sticker of the sample's
+// map is tilted 20 deg; the first frame shows the others, the next only
+// that one. (A sticker shifted along the body drags the pose with it: the
+// smooth surface does not hold the pose along itself, 15 mm -> 12.7 mm.)
+TEST_F(TrackingStage, AFrameWhoseOnlyStickerDisagreesIsCarriedOnTheSurface) {
+  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+  const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
+  TrackingInputs inputs = SampleInputs();
+  const TrackerOptions options = MakeTrackerOptions(config, inputs);
+  const Rigid3d truth = sample.CameraGroundTruth()->front().room_from_x.Inverse() *
+                        sample.BodyGroundTruth()->front().room_from_x;
+  const RgbdFrame frame = sample.LoadFrame(0, config.camera);
+  // A sticker facing the camera, near the image centre.
+  int moved = -1;
+  double nearest = 1e9;
+  for (const auto& [id, model_from_sticker] : inputs.model_from_marker) {
+    const Rigid3d camera_from_sticker = truth * model_from_sticker;
+    if ((camera_from_sticker.rotation * Eigen::Vector3d::UnitZ())
+            .dot(camera_from_sticker.translation) > 0)
+      continue;
+    const Eigen::Vector2d px = config.camera.Project(camera_from_sticker.translation);
+    const double d = (px - Eigen::Vector2d(config.camera.cx, config.camera.cy)).norm();
+    if (d < nearest) nearest = d, moved = id;
+  }
+  ASSERT_GE(moved, 0);
+  std::map<int, Rigid3d> model_from_marker = inputs.model_from_marker;
+  model_from_marker[moved].rotation =
+      model_from_marker[moved].rotation *
+      Eigen::Quaterniond(Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitX()));
+  // The first frame without that sticker, the next with it alone.
+  int painted = 0;
+  std::set<int> others;
+  for (const auto& [id, pose] : inputs.model_from_marker) {
+    if (id != moved) others.insert(id);
+  }
+  RgbdFrame without = frame, alone = frame;
+  without.color = PaintStickers(frame, others, &painted);
+  ASSERT_EQ(painted, 1);
+  alone.timestamp_s += 1.0 / 30;
+  alone.color = PaintStickers(frame, {moved}, &painted);
+  ASSERT_GE(painted, 1);
+  for (const bool sticker_moved : {false, true}) {
+    BodyTracker tracker(inputs.model, sticker_moved ? model_from_marker : inputs.model_from_marker,
+                        config.camera, options.body);
+    const BodyPoseResult first = tracker.Track(without, truth);
+    ASSERT_TRUE(first.ok) << first.message;
+    EXPECT_EQ(std::count(first.sticker_ids.begin(), first.sticker_ids.end(), moved), 0);
+    EXPECT_LT((first.camera_from_model.translation - truth.translation).norm(), 0.003);
+    const BodyPoseResult next = tracker.Track(alone);
+    ASSERT_TRUE(next.ok) << "sticker " << moved << (sticker_moved ? " moved: " : ": ")
+                         << next.message;
+    EXPECT_LT((next.camera_from_model.translation - truth.translation).norm(), 0.003);
+    if (!sticker_moved) {
+      // As mapped, the sticker holds the frame itself.
+      EXPECT_EQ(next.source, BodyPoseSource::kStickers);
+      EXPECT_EQ(next.sticker_ids, std::vector<int>{moved});
+      continue;
+    }
+    EXPECT_EQ(next.source, BodyPoseSource::kCarried);
+    EXPECT_TRUE(next.sticker_ids.empty());
+    EXPECT_EQ(next.stickers_dropped, std::vector<int>{moved});
+    EXPECT_NE(
+        next.message.find("every sticker read disagreed with the surface: carried on the surface"),
+        std::string::npos)
+        << next.message;
+  }
 }
 
 // Stickers expected in view but too small to read (2 cm stickers seen from
