@@ -32,6 +32,12 @@ std::string TrackerOptions::Validate() const {
   if (!(uncertainty_floor_mm >= 0) || !(uncertainty_floor_deg >= 0)) return "uncertainty floors must not be negative";
   if (!(max_position_sigma_mm > 0)) return "max_position_sigma_mm must be positive";
   if (!(max_camera_carry_s >= 0)) return "max_camera_carry_s must not be negative";
+  if (!(max_patient_speed_m_s >= 0) || !(patient_jump_margin_m >= 0) ||
+      !(patient_jump_window_s >= 0) ||
+      !std::isfinite(max_patient_speed_m_s + patient_jump_margin_m + patient_jump_window_s)) {
+    return "max_patient_speed_m_s, patient_jump_margin_m and patient_jump_window_s must be finite "
+           "and not negative";
+  }
   if (!(room_frame_position_sigma_mm >= 0 && std::isfinite(room_frame_position_sigma_mm)) ||
       !(room_frame_rotation_sigma_deg >= 0 && std::isfinite(room_frame_rotation_sigma_deg))) {
     return "the room frame's sigmas must be finite and not negative";
@@ -122,6 +128,8 @@ void Tracker::WarmUp() {
   last_room_from_camera_.reset();
   last_room_from_model_.reset();
   last_camera_t_ = last_model_t_ = -1;
+  last_seen_room_from_model_.reset();
+  last_seen_t_ = -1;
 }
 
 CorrectionUncertainty Tracker::BoundOf(double position_sigma_mm, double rotation_sigma_deg) const {
@@ -163,6 +171,27 @@ bool Tracker::CarryByMotion(double t, const std::string& why, TrackedFrame* out)
   if (out->correction.state == CorrectionState::kIn) out->correction.state = CorrectionState::kOut;
   out->message = StringPrintf("pose predicted %.2f s ahead by its motion; ", t - last_model_t_) + why;
   return true;
+}
+
+std::string PatientJumpRefusal(const TrackerOptions& options, double dt_s,
+                               const Rigid3d& last_room_from_model, const Rigid3d& room_from_model,
+                               int room_markers_used) {
+  if (!(options.max_patient_speed_m_s > 0) || room_markers_used > 0) return "";
+  if (!(dt_s > 0 && dt_s <= options.patient_jump_window_s)) return "";
+  const double moved_m = (room_from_model.translation - last_room_from_model.translation).norm();
+  const double reach_m = options.max_patient_speed_m_s * dt_s + options.patient_jump_margin_m;
+  if (!(moved_m > reach_m)) return "";
+  return StringPrintf(
+      "placed without a room marker where the patient would have moved %.0f mm in %.2f s (at most "
+      "%.0f mm); refused",
+      1000 * moved_m, dt_s, 1000 * reach_m);
+}
+
+std::string Tracker::PatientJump(double t, const LocalizationResult& camera,
+                                 const BodyPoseResult& body) const {
+  if (!camera.ok || !body.ok || !last_seen_room_from_model_) return "";
+  return PatientJumpRefusal(options_, t - last_seen_t_, *last_seen_room_from_model_,
+                            camera.room_from_camera * body.camera_from_model, camera.markers_used);
 }
 
 TrackedFrame Tracker::Process(const RgbdFrame& input) {
@@ -258,6 +287,21 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     return out;
   }
   out.timings.camera = out.camera.timings;
+  if (const std::string jump = PatientJump(frame.timestamp_s, out.camera, out.body);
+      !jump.empty()) {
+    // The patient seen in this frame is where it was: the camera is searched
+    // for again where the patient puts it.
+    ARPOS_DEBUG("camera frame " << frame.index << ": " << jump);
+    out.camera.ok = false;
+    out.camera.status = LocalizationStatus::kLost;
+    out.camera.message = jump;
+    camera_->Reset();
+    camera_->SuggestSearchStart(*last_seen_room_from_model_ * out.body.camera_from_model.Inverse());
+  }
+  if (out.camera.ok && out.body.ok) {
+    last_seen_room_from_model_ = out.camera.room_from_camera * out.body.camera_from_model;
+    last_seen_t_ = frame.timestamp_s;
+  }
   ARPOS_DEBUG(
       "camera frame " << frame.index << ": "
                       << (out.camera.ok ? LocalizationStatusName(out.camera.status) : "lost")

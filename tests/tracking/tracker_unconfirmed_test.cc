@@ -74,5 +74,47 @@ TEST(Tracker, ACameraPlacedByKeypointsAloneNeverLetsAFrameReadIn) {
   EXPECT_EQ(in, 0);
 }
 
+// A camera placed without a room marker is refused when the patient seen in
+// it would have moved farther than a patient on a couch does between frames
+// (0.15 m/s and 2 cm by default); a room marker, the check switched off or
+// a last frame too old leave it be, and the reason says how far.
+TEST(Tracker, ACameraThatWouldMakeThePatientJumpIsRefused) {
+  TrackerOptions options;
+  ASSERT_EQ(options.Validate(), "");
+  const Rigid3d last(Eigen::Quaterniond(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ())),
+                     Eigen::Vector3d(0.4, 1.2, 0.9));
+  auto moved = [&](double x_m) {
+    Rigid3d now = last;
+    now.translation.x() += x_m;
+    return now;
+  };
+  // 1/15 s: reach 0.15 * 0.067 + 0.02 = 30 mm.
+  const double dt = 1.0 / 15;
+  EXPECT_EQ(PatientJumpRefusal(options, dt, last, moved(0.029), 0), "");
+  const std::string refused = PatientJumpRefusal(options, dt, last, moved(0.065), 0);
+  EXPECT_NE(refused.find("the patient would have moved 65 mm in 0.07 s (at most 30 mm); refused"),
+            std::string::npos)
+      << refused;
+  // Measured along any direction, the rotation aside.
+  Rigid3d turned = moved(0.0);
+  turned.translation.z() -= 0.04;
+  turned.rotation =
+      Eigen::Quaterniond(Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitX())) * turned.rotation;
+  EXPECT_NE(PatientJumpRefusal(options, dt, last, turned, 0), "");
+  // A room marker places the camera: the patient may have moved.
+  EXPECT_EQ(PatientJumpRefusal(options, dt, last, moved(0.065), 1), "");
+  // The last frame too old to compare with, or none before this one.
+  EXPECT_EQ(PatientJumpRefusal(options, 0.25, last, moved(0.065), 0), "");
+  EXPECT_EQ(PatientJumpRefusal(options, 0.0, last, moved(0.065), 0), "");
+  // Longer apart, farther: 0.2 s reaches 50 mm.
+  EXPECT_EQ(PatientJumpRefusal(options, 0.2, last, moved(0.049), 0), "");
+  EXPECT_NE(PatientJumpRefusal(options, 0.2, last, moved(0.051), 0), "");
+  options.max_patient_speed_m_s = 0;
+  EXPECT_EQ(options.Validate(), "");
+  EXPECT_EQ(PatientJumpRefusal(options, dt, last, moved(0.5), 0), "");
+  options.patient_jump_margin_m = -0.01;
+  EXPECT_NE(options.Validate(), "");
+}
+
 }  // namespace
 }  // namespace arpos
