@@ -801,6 +801,8 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
     fit(*predicted, o.max_iterations);
     result.stickers_dropped = dropped;
   }
+  // How a frame carried on the surface (or refused as such) says why.
+  const char* what = all_disagreed ? "every sticker read disagreed with the surface" : "no sticker in view";
   // A sticker dropped, found again where the fit put it (step 5) and
   // dropped again is named once.
   std::sort(result.stickers_dropped.begin(), result.stickers_dropped.end());
@@ -862,8 +864,6 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
   } else if (carried) {
     accept = surface_ok && !from_hint && m.frames_without_stickers < o.max_frames_without_stickers;
     if (!accept) {
-      const char* what =
-          all_disagreed ? "every sticker read disagreed with the surface" : "no sticker in view";
       result.message =
           (!surface_ok
                ? StringPrintf("%s; the surface alone does not hold (%d depth inliers, %.0f %%)",
@@ -895,8 +895,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
     ++m.frames_without_stickers;
     result.message = StringPrintf(
         "%s: carried on the surface (%d of %d frames)",
-        all_disagreed ? "every sticker read disagreed with the surface" : "no sticker in view",
-        m.frames_without_stickers, o.max_frames_without_stickers);
+        what, m.frames_without_stickers, o.max_frames_without_stickers);
   } else {
     m.frames_without_stickers = 0;
   }

@@ -291,7 +291,6 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       !jump.empty()) {
     // The patient seen in this frame is where it was: the camera is searched
     // for again where the patient puts it.
-    ARPOS_DEBUG("camera frame " << frame.index << ": " << jump);
     out.camera.ok = false;
     out.camera.status = LocalizationStatus::kLost;
     out.camera.message = jump;
