@@ -6,6 +6,8 @@
 #include <map>
 #include <sstream>
 
+#include <opencv2/imgproc.hpp>
+
 #include "body_model/rigid_offsets.h"
 #include "features/response_from_recording.h"
 #include "geometry/mesh_io.h"
@@ -146,6 +148,7 @@ std::string SessionStageOptions::Check() const {
   if (min_stickers < 1) return "min_stickers must be at least 1";
   if (!(min_sticker_reading_distance_m >= 0)) return "min_sticker_reading_distance_m must not be negative";
   if (threads < 1) return "threads must be at least 1";
+  if (max_scan_landmarks < 0) return "max_scan_landmarks must not be negative";
   return "";
 }
 
@@ -165,7 +168,7 @@ std::string SessionStageResult::Summary() const {
       "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) "
       "deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
-      "%.2f, store %.2f, total %.2f\n",
+      "%.2f, room landmarks %.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()), frames,
       frames_considered, frames_localized, frames_posed_by_stickers, camera_response.c_str(),
       marker_map.markers.size(), marker_map.mean_rms_px, marker_map.rejected.size(),
@@ -185,14 +188,25 @@ std::string SessionStageResult::Summary() const {
       alignment_status.c_str(), alignment_fitness, 1000 * alignment_rmse_m,
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
-      times.marker_map_s, times.reconstruction_s, times.mesh_s, times.alignment_s, times.store_s,
-      times.total_s);
+      times.marker_map_s, times.reconstruction_s, times.mesh_s, times.alignment_s,
+      times.scan_landmarks_s, times.store_s, times.total_s);
   if (surface_offset_frames >= 3) {
     out << StringPrintf("room offset from %d room-localised frames registered to the reconstruction: %.2f mm at "
                         "the stickers\n",
                         surface_offset_frames, 1000 * surface_offset_shift_m.norm());
   }
   out << RoomPlacementText() << "\n";
+  if (scan_landmarks.frames > 0) {
+    out << StringPrintf(
+        "room landmarks the scan sees, for tracking: %d new to the room map (of %d keypoints seen "
+        "in "
+        "enough of %d frames; %d the map holds), outside the couch and the patient, each to %.1f "
+        "mm, "
+        "in the room as the scan is (%.2f mm)\n",
+        scan_landmarks.size(), scan_landmarks.groups, scan_landmarks.frames,
+        scan_landmarks.duplicates, 1000 * scan_landmarks.spread_m,
+        1000 * scan_landmarks.placement_sigma_m);
+  }
   if (surface_motion.frames > 0) out << SurfaceMotionText() << "\n";
   if (sticker_reading_distance_m > 0) {
     out << StringPrintf("stickers readable up to %.2f m from this camera (face-on)\n", sticker_reading_distance_m);
@@ -381,10 +395,13 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     std::optional<PointCloud> cloud;
     std::optional<PointCloud> sticker_cloud;  ///< frames with stickers or a room pose, for steps 4-5
     std::optional<Rigid3d> surface_pose;      ///< registered to the reconstruction (step 4)
+    KeypointSet keypoints;                    ///< for the room landmarks the scan sees (step 7)
   };
   std::vector<ScanFrame> frames;
+  KeypointExtractor keypoint_extractor(localizer_options.keypoints);
+  cv::Mat gray;
   std::map<int, int> unmapped_reads;  // room marker id -> frames that read it, not in the map
-  double t_localize = 0, t_markers = 0, t_recon = 0;
+  double t_localize = 0, t_markers = 0, t_recon = 0, t_landmarks = 0;
   for (size_t i = 0; i < scan.size(); ++i) {
     const bool for_markers = i % marker_step == 0;
     const bool for_recon = i % recon_step == 0;
@@ -413,6 +430,12 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     t0 = Clock::now();
     if (for_recon) f.cloud = DepthToCloud(frame, camera, depth_options);
     t_recon += SecondsSince(t0);
+    if (options.scan_landmarks && for_markers && !frame.depth.empty()) {
+      t0 = Clock::now();
+      cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+      keypoint_extractor.Extract(gray, frame.depth, camera.depth_scale, &f.keypoints);
+      t_landmarks += SecondsSince(t0);
+    }
     t0 = Clock::now();
     if (options.stickers_on_surface && for_markers && (!f.view.markers.empty() || f.localized)) {
       // Kept thinned: registered to the reconstruction at 1 cm voxels (step 4).
@@ -854,6 +877,30 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     }
   }
   result.room_from_model = refined.target_from_source.Inverse();
+  // 7. The room around the couch as the scan saw it, for tracking
+  //    (scan_landmarks.h): the frames' final poses, what moves left out;
+  //    only when how well they sit in the room is known.
+  if (options.scan_landmarks && std::isfinite(result.room_placement_sigma_mm)) {
+    step("placing the room landmarks the scan sees", 0.95);
+    const auto t_scan = Clock::now();
+    std::vector<ScanLandmarkFrame> landmark_frames;
+    for (ScanFrame& f : frames) {
+      if (!f.posed || f.keypoints.size() == 0) continue;
+      landmark_frames.push_back(
+          {f.surface_pose.value_or(f.view.room_from_camera), std::move(f.keypoints)});
+    }
+    ScanLandmarkOptions landmark_options;
+    landmark_options.exclude = {CouchExclusionBox(plan.room_from_model_target),
+                                CouchExclusionBox(result.room_from_model)};
+    landmark_options.triangulation.depth_sigma_const_m = localizer_options.depth_sigma_const_m;
+    landmark_options.triangulation.depth_sigma_quad_per_m =
+        localizer_options.depth_sigma_quad_per_m;
+    landmark_options.max_landmarks = options.max_scan_landmarks;
+    result.scan_landmarks =
+        PlaceScanLandmarks(landmark_frames, camera, landmark_options, &plan.room_map);
+    result.scan_landmarks.placement_sigma_m = result.room_placement_sigma_mm / 1000;
+    result.times.scan_landmarks_s = t_landmarks + SecondsSince(t_scan);
+  }
   result.alignment_fitness = refined.fitness;
   result.alignment_rmse_m = refined.rmse_m;
   result.alignment_inliers = refined.num_inliers;
@@ -942,6 +989,7 @@ void StoreSession(Database* database, const CaseFolder& folder, const SessionSta
     }
     map.surface_patch_m = result->surface_motion.patch_m;
     map.moving_surface_patches = result->surface_motion.MovingPatchCentres();
+    ToRecord(result->scan_landmarks, &map);
     map.mean_residual_px = result->marker_map.mean_rms_px;
     map.max_residual_px = std::max(result->marker_map.max_rms_px, map.mean_residual_px);
     result->body_marker_map_id = database->AddBodyMarkerMap(map);

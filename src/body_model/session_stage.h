@@ -51,6 +51,7 @@
 #include "geometry/triangle_mesh.h"
 #include "registration/point_cloud.h"
 #include "room_map/room_map.h"
+#include "room_map/scan_landmarks.h"
 #include "sensor/case_folder.h"
 #include "store/records.h"
 #include "store/roles.h"
@@ -119,14 +120,19 @@ struct SessionStageOptions {
   bool align_on_still_surface = true;
   double min_still_surface_share = 0.3;
   int poisson_depth = 8;
+  /// Room landmarks the scan sees (room_map/scan_landmarks.h), stored with
+  /// the body marker map for tracking: at most this many (they come first
+  /// in the map tracking localises by, before the room map's own).
+  bool scan_landmarks = true;
+  int max_scan_landmarks = 2000;
   int threads = 2;
 
   std::string Check() const;  ///< empty if valid
 };
 
 struct SessionStepTimes {
-  double localization_s = 0, marker_map_s = 0, reconstruction_s = 0, mesh_s = 0,
-         alignment_s = 0, store_s = 0, total_s = 0;
+  double localization_s = 0, marker_map_s = 0, reconstruction_s = 0, mesh_s = 0, alignment_s = 0,
+         scan_landmarks_s = 0, store_s = 0, total_s = 0;
 };
 
 /// The final camera pose of one considered body-scan frame and where it
@@ -225,6 +231,8 @@ struct SessionStageResult {
   std::string alignment_method;  ///< "manual" or "automatic"
   std::string alignment_status;  ///< ok, or why the automatic result is doubtful
   Rigid3d room_from_model;       ///< reference model pose at scan time
+  /// The room around the couch as the scan's frames saw it (step 7).
+  ScanLandmarks scan_landmarks;
   double alignment_fitness = 0, alignment_rmse_m = 0;
   std::map<int, Rigid3d> model_from_markers;
   /// The mean correction taken off the reconstruction (none when not

@@ -148,10 +148,17 @@ int RunTrackCommand(const std::vector<std::string>& argv) {
   const TrackingInputs inputs = LoadTrackingInputs(database.get(), session, CasePatientId(*case_root),
                                                    options.op.role == Role::kResearch);
   std::cerr << "session: " << inputs.session_choice << "\n";
-  std::cerr << StringPrintf("tracking against session %lld (plan %lld, room map %lld, %zu stickers)\n",
+  std::cerr << StringPrintf("tracking against session %lld (plan %lld, room map %lld, %zu stickers",
                             static_cast<long long>(inputs.session_id.value()),
                             static_cast<long long>(inputs.plan_id.value()),
-                            static_cast<long long>(inputs.room_map_id.value()), inputs.model_from_marker.size());
+                            static_cast<long long>(inputs.room_map_id.value()),
+                            inputs.model_from_marker.size());
+  if (inputs.scan_landmarks > 0) {
+    std::cerr << StringPrintf(
+        "; %d room landmarks from its body scan, for frames the room map does not place",
+        inputs.scan_landmarks);
+  }
+  std::cerr << ")\n";
   options.max_frames = static_cast<int>(max_frames);
   // Ctrl-C (or a terminating signal) ends a run at the next frame: what was
   // tracked is written and stored. The server listens before the source and

@@ -154,6 +154,9 @@ struct CameraLocalizer::Impl {
   PoseCorrespondences corr;
   std::vector<int> match_of_keypoint;        // landmark per keypoint, -1
   std::vector<int> match_distance;
+  // The landmarks a body scan placed (RoomMap::scan_landmarks) are matched
+  // only while this is set: for frames the room map alone does not place.
+  bool use_scan = false;
 
   // Motion model.
   using Mat6 = Eigen::Matrix<double, 6, 6>;
@@ -454,13 +457,14 @@ struct CameraLocalizer::Impl {
   int SearchByProjection(const Rigid3d& camera_from_room, double radius_px) {
     const int n_kp = static_cast<int>(keypoints.size());
     match_of_keypoint.assign(n_kp, -1);
-    match_distance.assign(n_kp, 257);
+    match_distance.assign(n_kp, 2 * 257);
     if (n_kp == 0 || landmarks->empty()) return 0;
     const Eigen::Matrix3d R = camera_from_room.RotationMatrix();
     const Eigen::Vector3d t = camera_from_room.translation;
     const int border = options.keypoints.border_px - 2;
     const int n_landmarks = static_cast<int>(landmarks->size());
-    for (int l = 0; l < n_landmarks; ++l) {
+    const int first = landmarks == &map.landmarks_in_room && !use_scan ? map.scan_landmarks : 0;
+    for (int l = first; l < n_landmarks; ++l) {
       const Eigen::Vector3d p = R * (*landmarks)[l] + t;
       if (p.z() < 0.1) continue;
       double u = K.fx * p.x() / p.z() + K.cx, v = K.fy * p.y() / p.z() + K.cy;
@@ -483,8 +487,15 @@ struct CameraLocalizer::Impl {
       const int best = nearest.best, d1 = nearest.d1, d2 = nearest.d2;
       if (best < 0 || d1 > options.max_hamming) continue;
       if (d2 <= 256 && d1 > options.match_ratio * d2) continue;
-      if (d1 < match_distance[best]) {
-        match_distance[best] = d1;
+      // A landmark the body scan placed takes only a keypoint no room
+      // landmark wants: it looks more like the frame (seen from where
+      // tracking looks) but sits less surely (measured on a random case:
+      // the scan's landmarks took the room's keypoints and the camera
+      // drifted to 12 mm).
+      const int rank =
+          d1 + (landmarks == &map.landmarks_in_room && l < map.scan_landmarks ? 257 : 0);
+      if (rank < match_distance[best]) {
+        match_distance[best] = rank;
         match_of_keypoint[best] = l;
       }
     }
@@ -502,14 +513,16 @@ struct CameraLocalizer::Impl {
     const int n_kp = static_cast<int>(keypoints.size());
     match_of_keypoint.assign(n_kp, -1);
     match_distance.assign(n_kp, 257);
-    const int n_landmarks = std::min(map.num_landmarks(), options.relocalisation_max_landmarks);
+    const int first = use_scan ? 0 : map.scan_landmarks;
+    const int n_landmarks =
+        std::min(map.num_landmarks(), first + options.relocalisation_max_landmarks);
     cv::parallel_for_(
         cv::Range(0, n_kp),
         [&](const cv::Range& range) {
           for (int i = range.start; i < range.end; ++i) {
             const std::uint8_t* d = keypoints.descriptors.ptr<std::uint8_t>(i);
             NearestTwo nearest;
-            for (int l = 0; l < n_landmarks; ++l) {
+            for (int l = first; l < n_landmarks; ++l) {
               nearest.Offer(l, HammingDistance32(d, map.landmark_descriptors.ptr<std::uint8_t>(l)));
             }
             if (nearest.best < 0 || nearest.d1 > options.relocalisation_max_hamming ||
@@ -565,6 +578,17 @@ struct CameraLocalizer::Impl {
       if (l < 0) continue;
       const float z = keypoints.depth_m[i];
       const bool depth = options.use_keypoint_depth && z > 0;
+      if (landmarks == &map.landmarks_in_room && l < map.scan_landmarks &&
+          map.scan_landmark_sigma_m > 0) {
+        // A landmark the body scan placed: known to its own sigma, seen
+        // sideways at its distance (the keypoint's depth, else 2 m).
+        const double s = map.scan_landmark_sigma_m;
+        const double at_px = K.fx * s / (z > 0 ? z : 2.0);
+        corr.Add((*landmarks)[l], keypoint_px[i], std::hypot(keypoint_sigma, at_px),
+                 CorrespondenceGroup::kKeypoint, static_cast<int>(i), depth ? z : 0.0,
+                 depth ? std::hypot(DepthSigma(z), s) : 0.0);
+        continue;
+      }
       corr.Add((*landmarks)[l], keypoint_px[i], keypoint_sigma, CorrespondenceGroup::kKeypoint,
                static_cast<int>(i), depth ? z : 0.0, depth ? DepthSigma(z) : 0.0);
     }
@@ -693,6 +717,14 @@ struct CameraLocalizer::Impl {
     }
     out->markers_used = full;
     out->keypoints_used = r.keypoint_inliers;
+    out->scan_keypoints_used = 0;
+    if (landmarks == &map.landmarks_in_room && map.scan_landmarks > 0) {
+      for (size_t i = 0; i < corr.size(); ++i) {
+        if (corr.group[i] != CorrespondenceGroup::kKeypoint || !r.inlier[i]) continue;
+        const int l = match_of_keypoint[corr.tag[i]];
+        out->scan_keypoints_used += l >= 0 && l < map.scan_landmarks ? 1 : 0;
+      }
+    }
     out->plane_depth_samples = plane_samples_used;
     out->surface_depth_samples = surface_samples_used;
     out->rms_px = r.rms_px;
@@ -1091,6 +1123,43 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
       out.status = LocalizationStatus::kTracked;
       ok = true;
     }
+  }
+  if (!ok && options_.use_keypoints && options_.use_scan_landmarks && map_.scan_landmarks > 0) {
+    // The room map alone does not place this frame: the same tries with the
+    // landmarks the body scan placed around the couch (where tracking looks
+    // and the room recording may not have gone). Not before: they sit less
+    // surely than the room's (measured on a random case where both were
+    // matched: the camera pulled 12 mm off where the room's alone held it
+    // to 2 mm).
+    m.use_scan = true;
+    if (predicted) {
+      refined = m.Track(*predicted, options_.search_radius_px, prior, &tm.matching_ms,
+                        &tm.refinement_ms, &mark);
+      ok = m.Accept(refined, true, &out);
+      if (ok) out.status = LocalizationStatus::kTracked;
+    }
+    if (!ok && search_start) {
+      refined = m.Track(*search_start, options_.wide_search_radius_px, std::nullopt,
+                        &tm.matching_ms, &tm.refinement_ms, &mark);
+      ok = m.Accept(refined, false, &out);
+      if (ok) out.status = LocalizationStatus::kRelocalized;
+    }
+    if (!ok && m.have_last && m.frames_lost <= options_.recent_pose_max_frames) {
+      refined = m.Track(m.last_camera_from_room, options_.wide_search_radius_px, std::nullopt,
+                        &tm.matching_ms, &tm.refinement_ms, &mark);
+      ok = m.Accept(refined, false, &out);
+      if (ok) out.status = LocalizationStatus::kRelocalized;
+    }
+    if (!ok) {
+      if (const std::optional<Rigid3d> hypothesis =
+              m.Relocalise(frame, &tm.pnp_ms, &tm.matching_ms, &mark)) {
+        refined = m.Track(*hypothesis, options_.search_radius_px, std::nullopt, &tm.matching_ms,
+                          &tm.refinement_ms, &mark);
+        ok = m.Accept(refined, false, &out);
+        if (ok) out.status = LocalizationStatus::kRelocalized;
+      }
+    }
+    m.use_scan = false;
   }
   if (ok && out.status == LocalizationStatus::kRelocalized && out.markers_used == 0 && m.have_last &&
       m.frames_lost <= options_.recent_pose_max_frames) {

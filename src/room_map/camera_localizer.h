@@ -57,6 +57,9 @@ struct CameraLocalizerOptions {
 
   bool use_markers = true;
   bool use_keypoints = true;
+  /// Landmarks a session's body scan placed (RoomMap::scan_landmarks), for
+  /// frames the room map alone does not place.
+  bool use_scan_landmarks = true;
   /// Search markers only around their predicted corners while tracking
   /// (where the lens puts them; refined in the whole image).
   bool marker_windows = true;
@@ -310,6 +313,9 @@ struct LocalizationResult {
   LocalizationStatus status = LocalizationStatus::kLost;
   int markers_used = 0;      ///< markers with all 4 corners inliers
   int keypoints_used = 0;    ///< keypoint inliers
+  /// Of keypoints_used, those on landmarks a body scan placed
+  /// (RoomMap::scan_landmarks): they carry the scan's placement in the room.
+  int scan_keypoints_used = 0;
   /// Depth samples matched to the map's planes and to its surface (0: none
   /// used, or no depth).
   int plane_depth_samples = 0;

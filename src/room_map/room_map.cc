@@ -24,6 +24,11 @@ std::string RoomMap::Validate() const {
     return out.str();
   }
   if (markers.empty()) return "the map has no markers";
+  if (scan_landmarks < 0 || scan_landmarks > num_landmarks() ||
+      !(scan_landmark_sigma_m >= 0 && scan_landmark_sigma_m < 1)) {
+    out << scan_landmarks << " scan landmarks in a map of " << num_landmarks();
+    return out.str();
+  }
   for (size_t i = 0; i < markers.size(); ++i) {
     if (i > 0 && markers[i].id <= markers[i - 1].id) return "marker ids must be unique and sorted";
     if (!markers[i].room_from_marker.translation.allFinite()) {

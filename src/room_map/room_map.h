@@ -77,6 +77,13 @@ struct RoomMap {
   /// only (room_map_builder.h); a prefix is a fair sample of the room.
   std::vector<Eigen::Vector3d> landmarks_in_room;
   cv::Mat landmark_descriptors;
+  /// The first this many landmarks came from a session's body scan
+  /// (scan_landmarks.h: AddScanLandmarks), not from the room recording; 0
+  /// for a map as planned. Not stored with the map.
+  int scan_landmarks = 0;
+  /// Their position uncertainty each (1 sigma, m): the localiser weights
+  /// them by it.
+  double scan_landmark_sigma_m = 0;
   double mean_residual_px = 0;  ///< marker corners, over all markers and views
   double max_residual_px = 0;   ///< largest per-marker residual
   /// The response of the camera that recorded the room (estimated from its

@@ -20,6 +20,7 @@
 
 #include "geometry/so3.h"
 #include "room_map/depth_check.h"
+#include "room_map/landmark_triangulation.h"
 #include "room_map/marker_graph.h"
 #include "room_map/pose_refiner.h"
 #include "room_map/room_planes.h"
@@ -52,17 +53,6 @@ struct FrameData {
   Rigid3d camera_from_room;
 };
 
-std::vector<Eigen::Vector2d> UndistortPixels(const std::vector<Eigen::Vector2d>& px,
-                                             const CameraIntrinsics& k) {
-  if (!k.HasDistortion() || px.empty()) return px;
-  std::vector<cv::Point2d> in, out;
-  for (const auto& p : px) in.emplace_back(p.x(), p.y());
-  cv::undistortPoints(in, out, k.CvK(), k.CvDistortion(), cv::noArray(), k.CvK());
-  std::vector<Eigen::Vector2d> result;
-  for (const auto& p : out) result.emplace_back(p.x, p.y);
-  return result;
-}
-
 // One landmark candidate while associating.
 struct Candidate {
   Eigen::Vector3d weighted_sum = Eigen::Vector3d::Zero();
@@ -75,22 +65,6 @@ struct Candidate {
 
 const std::uint8_t* Descriptor(const std::vector<FrameData>& frames, int slot, int kp) {
   return frames[slot].keypoints.descriptors.ptr<std::uint8_t>(kp);
-}
-
-// The medoid of a landmark's descriptors (least summed Hamming distance to
-// the others); null for none.
-const std::uint8_t* MedoidDescriptor(const std::vector<const std::uint8_t*>& descs) {
-  const std::uint8_t* best = nullptr;
-  int best_sum = INT32_MAX;
-  for (const std::uint8_t* a : descs) {
-    int sum = 0;
-    for (const std::uint8_t* b : descs) sum += HammingDistance32(a, b);
-    if (sum < best_sum) {
-      best_sum = sum;
-      best = a;
-    }
-  }
-  return best;
 }
 
 // A plane's tilt about the origin's centre, in the origin marker's frame:
@@ -276,92 +250,41 @@ void AddLocalizationLandmarks(const std::vector<Candidate>& candidates, const st
     return candidates[a].observations.size() > candidates[b].observations.size();
   });
   const bool correct_depth = !depth_correction.IsIdentity();
-  struct Obs {
-    int slot, keypoint, camera;
-    Eigen::Vector2d px;
-    double depth;  // corrected, 0 without
-  };
-  std::vector<Obs> obs;
+  LandmarkTriangulationOptions tri;
+  tri.keypoint_sigma_px = options.keypoint_sigma_px;
+  tri.depth_sigma_const_m = ba_options.depth_sigma_const_m;
+  tri.depth_sigma_quad_per_m = ba_options.depth_sigma_quad_per_m;
+  tri.outlier_sigmas = options.outlier_sigmas;
+  tri.min_observations = options.min_landmark_observations;
+  std::vector<LandmarkObservation> obs;
+  std::vector<std::pair<int, int>> source;  // (frame slot, keypoint) of each observation
   std::vector<const std::uint8_t*> descs;
   int added = 0;
   for (int c : order) {
     if (added >= options.max_localization_landmarks) break;
     obs.clear();
+    source.clear();
     for (const auto& [s, i] : candidates[c].observations) {
       if (s < 0 || s >= static_cast<int>(camera_slot.size()) || camera_slot[s] < 0) continue;
-      Obs o{s, i, camera_slot[s], frames[s].keypoint_px[i], frames[s].keypoints.depth_m[i]};
-      if (o.depth > 0 && correct_depth) {
-        o.depth = depth_correction.TrueDepth(o.depth, (o.px.x() - K.cx) / K.fx, (o.px.y() - K.cy) / K.fy);
+      LandmarkObservation o{camera_slot[s], frames[s].keypoint_px[i],
+                            frames[s].keypoints.depth_m[i]};
+      if (o.depth_m > 0 && correct_depth) {
+        o.depth_m = depth_correction.TrueDepth(o.depth_m, (o.px.x() - K.cx) / K.fx,
+                                               (o.px.y() - K.cy) / K.fy);
       }
       obs.push_back(o);
+      source.emplace_back(s, i);
     }
-    if (static_cast<int>(obs.size()) < options.min_landmark_observations) continue;
-    // Start: the nearest observation with depth (its depth is the most precise).
-    int start = -1;
-    for (size_t k = 0; k < obs.size(); ++k) {
-      if (obs[k].depth > 0 && (start < 0 || obs[k].depth < obs[start].depth)) start = static_cast<int>(k);
-    }
-    if (start < 0) continue;
-    Eigen::Vector3d X = camera_from_room[obs[start].camera].Inverse() *
-                        K.Unproject(obs[start].px.x(), obs[start].px.y(), obs[start].depth);
-    std::vector<bool> inlier(obs.size(), true);
-    bool ok = true;
-    for (int pass = 0; pass < 2 && ok; ++pass) {
-      for (int it = 0; it < 5; ++it) {
-        Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-        Eigen::Vector3d g = Eigen::Vector3d::Zero();
-        for (size_t k = 0; k < obs.size(); ++k) {
-          if (!inlier[k]) continue;
-          const Rigid3d& T = camera_from_room[obs[k].camera];
-          const Eigen::Matrix3d R = T.RotationMatrix();
-          const Eigen::Vector3d p = T * X;
-          if (p.z() < 0.05) continue;
-          const double iz = 1.0 / p.z();
-          Eigen::Matrix<double, 2, 3> J;
-          J << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz;
-          J = J * R;
-          const Eigen::Vector2d r(K.fx * p.x() * iz + K.cx - obs[k].px.x(), K.fy * p.y() * iz + K.cy - obs[k].px.y());
-          const double w = 1.0 / (options.keypoint_sigma_px * options.keypoint_sigma_px);
-          H += w * J.transpose() * J;
-          g += w * J.transpose() * r;
-          if (obs[k].depth > 0) {
-            const double sz = ba_options.DepthSigmaM(obs[k].depth);
-            const Eigen::RowVector3d Jz = R.row(2);
-            H += Jz.transpose() * Jz / (sz * sz);
-            g += Jz.transpose() * (p.z() - obs[k].depth) / (sz * sz);
-          }
-        }
-        const Eigen::Vector3d step = H.ldlt().solve(-g);
-        if (!step.allFinite()) {
-          ok = false;
-          break;
-        }
-        X += step;
-        if (step.norm() < 1e-6) break;
-      }
-      // Outliers as the adjustment drops them, then solve once more.
-      int n_in = 0;
-      for (size_t k = 0; k < obs.size(); ++k) {
-        const Eigen::Vector3d p = camera_from_room[obs[k].camera] * X;
-        if (p.z() < 0.05) {
-          ok = false;
-          break;
-        }
-        const double e = (K.Project(p) - obs[k].px).norm();
-        const bool z_ok = !(obs[k].depth > 0) ||
-                          std::abs(p.z() - obs[k].depth) < options.outlier_sigmas * ba_options.DepthSigmaM(obs[k].depth);
-        inlier[k] = e < options.outlier_sigmas * options.keypoint_sigma_px && z_ok;
-        n_in += inlier[k];
-      }
-      if (n_in < options.min_landmark_observations) ok = false;
-    }
-    if (!ok || !X.allFinite()) continue;
+    const std::optional<TriangulatedLandmark> placed =
+        TriangulateLandmark(obs, camera_from_room, K, tri);
+    if (!placed) continue;
+    const Eigen::Vector3d& X = placed->point_in_room;
     bool excluded = false;
     for (const auto& box : options.exclude_landmarks) excluded |= box.Contains(X);
     if (excluded) continue;
     descs.clear();
     for (size_t k = 0; k < obs.size(); ++k) {
-      if (inlier[k]) descs.push_back(Descriptor(frames, obs[k].slot, obs[k].keypoint));
+      if (placed->inlier[k]) descs.push_back(Descriptor(frames, source[k].first, source[k].second));
     }
     map->landmarks_in_room.push_back(X);
     cv::Mat row(1, kDescriptorBytes, CV_8UC1);
@@ -598,7 +521,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
                 SampleMarkerDepth(frame.depth, obs.corners_px, K, options.marker_depth_samples);
             MarkerObservation ideal = obs;
             const std::vector<Eigen::Vector2d> c =
-                UndistortPixels({obs.corners_px.begin(), obs.corners_px.end()}, K);
+                IdealPixels({obs.corners_px.begin(), obs.corners_px.end()}, K);
             for (int k = 0; k < 4; ++k) ideal.corners_px[k] = c[k];
             f.markers.push_back(ideal);
             f.poses.push_back(pose);
@@ -615,7 +538,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
             std::vector<Eigen::Vector2d> px;
             px.reserve(f.keypoints.size());
             for (const auto& kp : f.keypoints.keypoints) px.emplace_back(kp.pt.x, kp.pt.y);
-            f.keypoint_px = UndistortPixels(px, K);
+            f.keypoint_px = IdealPixels(px, K);
           }
           ++done;
         }

@@ -159,6 +159,8 @@ std::string AuditedRowHash(sqlite3* db, const std::string& entity) {
       // Schema 9; a map without breathing rows hashes as before.
       AppendRows(db, "SELECT * FROM body_marker_motion WHERE body_marker_map_id = ?1 ORDER BY marker_id", id, &data);
       AppendRows(db, "SELECT * FROM body_surface_motion WHERE body_marker_map_id = ?1", id, &data);
+      // Schema 11; a map without scan landmarks hashes as before.
+      AppendRows(db, "SELECT * FROM body_scan_landmarks WHERE body_marker_map_id = ?1", id, &data);
     } else if (kind == "tracking_run") {
       AppendRows(db, "SELECT * FROM tracking_frames WHERE tracking_run_id = ?1 ORDER BY frame_index", id, &data);
     }

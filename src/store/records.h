@@ -249,6 +249,17 @@ struct BodyMarkerMapRecord {
   /// nothing moved, or nothing could be told.
   double surface_patch_m = 0;
   std::vector<Eigen::Vector3d> moving_surface_patches;
+  /// The room around the couch as the scan saw it (room_map/scan_landmarks.h):
+  /// keypoint landmarks in the room frame and, row for row, their ORB
+  /// descriptors (N x 32), for tracking. Empty: none (maps stored before
+  /// schema version 11, or a scan that placed none).
+  StoredPointCloud room_landmarks;
+  ByteMatrix room_landmark_descriptors;
+  /// How well they sit in the room (1 sigma, m): all together, as the
+  /// session placed its scan (at the stickers), and each on its own (how
+  /// far its views disagree: ScanLandmarks::spread_m).
+  double room_landmarks_placement_sigma_m = 0;
+  double room_landmarks_position_sigma_m = 0;
   std::int64_t created_unix_ms = 0;
 };
 

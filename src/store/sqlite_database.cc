@@ -743,6 +743,30 @@ BodyMarkerMapId SqliteDatabase::AddBodyMarkerMap(const BodyMarkerMapRecord& map)
     m->BindBlob(3, EncodeMatrix(centres));
     m->Execute();
   }
+  if (!map.room_landmarks.points.empty()) {
+    ARPOS_CHECK(map.room_landmark_descriptors.rows() ==
+                        static_cast<Eigen::Index>(map.room_landmarks.points.size()) &&
+                    map.room_landmark_descriptors.cols() == 32,
+                "body marker map room landmarks: "
+                    << map.room_landmarks.points.size() << " points but "
+                    << map.room_landmark_descriptors.rows() << " x "
+                    << map.room_landmark_descriptors.cols() << " descriptors");
+    ARPOS_CHECK(
+        map.room_landmarks_placement_sigma_m >= 0 && map.room_landmarks_placement_sigma_m < 1 &&
+            map.room_landmarks_position_sigma_m >= 0 && map.room_landmarks_position_sigma_m < 1,
+        "body marker map room landmarks: sigmas " << map.room_landmarks_placement_sigma_m << ", "
+                                                  << map.room_landmarks_position_sigma_m << " m");
+    SqliteStatementGuard m(
+        Prepared("INSERT INTO body_scan_landmarks (body_marker_map_id, placement_sigma_m, "
+                 "position_sigma_m, points, "
+                 "descriptors) VALUES (?1, ?2, ?3, ?4, ?5)"));
+    m->BindId(1, id);
+    m->BindDouble(2, map.room_landmarks_placement_sigma_m);
+    m->BindDouble(3, map.room_landmarks_position_sigma_m);
+    m->BindBlob(4, EncodePointCloud(map.room_landmarks));
+    m->BindBlob(5, EncodeByteMatrix(map.room_landmark_descriptors));
+    m->Execute();
+  }
   transaction.Commit();
   return id;
 }
@@ -802,6 +826,25 @@ std::optional<BodyMarkerMapRecord> SqliteDatabase::GetBodyMarkerMap(BodyMarkerMa
                              " columns, expected 3");
     }
     for (Eigen::Index i = 0; i < centres.rows(); ++i) map.moving_surface_patches.push_back(centres.row(i).transpose());
+  }
+  SqliteStatementGuard l(Prepared(
+      "SELECT placement_sigma_m, position_sigma_m, points, descriptors FROM body_scan_landmarks "
+      "WHERE body_marker_map_id = ?1"));
+  l->BindId(1, id);
+  if (l->Step()) {
+    const std::string what = "body_scan_landmarks of body marker map " + std::to_string(id.value());
+    map.room_landmarks_placement_sigma_m = l->ColumnDouble(0);
+    map.room_landmarks_position_sigma_m = l->ColumnDouble(1);
+    map.room_landmarks = DecodePointCloud(l->ColumnBlob(2), what + " (points)");
+    map.room_landmark_descriptors = DecodeByteMatrix(l->ColumnBlob(3), what + " (descriptors)");
+    if (map.room_landmark_descriptors.rows() !=
+            static_cast<Eigen::Index>(map.room_landmarks.points.size()) ||
+        (map.room_landmark_descriptors.rows() > 0 && map.room_landmark_descriptors.cols() != 32)) {
+      throw CorruptBlobError(what + ": " + std::to_string(map.room_landmarks.points.size()) +
+                             " points but " + std::to_string(map.room_landmark_descriptors.rows()) +
+                             " x " + std::to_string(map.room_landmark_descriptors.cols()) +
+                             " descriptors");
+    }
   }
   return map;
 }

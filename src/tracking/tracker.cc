@@ -42,6 +42,9 @@ std::string TrackerOptions::Validate() const {
       !(room_frame_rotation_sigma_deg >= 0 && std::isfinite(room_frame_rotation_sigma_deg))) {
     return "the room frame's sigmas must be finite and not negative";
   }
+  if (!(scan_landmark_sigma_mm >= 0 && std::isfinite(scan_landmark_sigma_mm))) {
+    return "scan_landmark_sigma_mm must be finite and not negative";
+  }
   problem = filter.Validate();
   if (!problem.empty()) return "filter: " + problem;
   return "";
@@ -305,9 +308,10 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       "camera frame " << frame.index << ": "
                       << (out.camera.ok ? LocalizationStatusName(out.camera.status) : "lost")
                       << ", " << out.camera.markers_used << " markers, "
-                      << out.camera.keypoints_used << " keypoints, rms " << out.camera.rms_px
-                      << " px, sigma " << out.camera.position_sigma_mm << " mm "
-                      << out.camera.rotation_sigma_deg << " deg"
+                      << out.camera.keypoints_used << " keypoints ("
+                      << out.camera.scan_keypoints_used << " on the scan's landmarks), rms "
+                      << out.camera.rms_px << " px, sigma " << out.camera.position_sigma_mm
+                      << " mm " << out.camera.rotation_sigma_deg << " deg"
                       << (out.camera.followed ? ", followed" : "")
                       << (out.camera.unconfirmed ? ", unconfirmed" : "")
                       << (out.camera.held_by_depth ? ", held by depth" : "")
@@ -331,8 +335,14 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   if (out.camera.ok && out.body.ok) {
     const double distance_m = out.body.camera_from_model.translation.norm();
     const double cam_rot_rad = out.camera.rotation_sigma_deg / kDegPerRad;
-    own_sigma_mm = std::sqrt(std::pow(out.camera.position_sigma_mm, 2) + std::pow(1000 * cam_rot_rad * distance_m, 2) +
-                             std::pow(out.body.position_sigma_mm, 2));
+    const double scan_share =
+        out.camera.keypoints_used > 0
+            ? static_cast<double>(out.camera.scan_keypoints_used) / out.camera.keypoints_used
+            : 0.0;
+    own_sigma_mm = std::sqrt(std::pow(out.camera.position_sigma_mm, 2) +
+                             std::pow(1000 * cam_rot_rad * distance_m, 2) +
+                             std::pow(out.body.position_sigma_mm, 2) +
+                             std::pow(scan_share * options_.scan_landmark_sigma_mm, 2));
   }
   if (out.camera.ok && out.body.ok && own_sigma_mm > options_.max_position_sigma_mm) {
     const std::string why =

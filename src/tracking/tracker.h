@@ -97,6 +97,12 @@ struct TrackerOptions {
   /// direction would have read `in`.
   double room_frame_position_sigma_mm = 0;
   double room_frame_rotation_sigma_deg = 0;
+  /// How well the session placed its body scan in the room (1 sigma at the
+  /// stickers): the room landmarks the scan placed (RoomMap::scan_landmarks)
+  /// carry it. A frame whose camera keypoints are partly on them gets it in
+  /// its own uncertainty, in proportion to their share of the keypoint
+  /// inliers (in quadrature).
+  double scan_landmark_sigma_mm = 0;
 
   std::string Validate() const;
 };

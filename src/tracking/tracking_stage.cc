@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "features/response_from_recording.h"
+#include "room_map/scan_landmarks.h"
 #include "sensor/frame_feed.h"
 #include "sensor/sequence.h"
 #include "sensor/source_plugin.h"
@@ -158,6 +159,8 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   }
   in.moving_surface_patches = markers->moving_surface_patches;
   in.surface_patch_m = markers->surface_patch_m;
+  in.scan_landmarks = AddScanLandmarks(*markers, &in.room_map);
+  in.scan_landmark_sigma_mm = 1000 * markers->room_landmarks_placement_sigma_m;
   if (in.model_from_marker.empty()) {
     ARPOS_INPUT_ERROR("session " << chosen.value() << ": its body marker map holds no sticker");
   }
@@ -173,6 +176,7 @@ TrackerOptions MakeTrackerOptions(const CaseConfig& config, const TrackingInputs
   options.body.detector.edge.response = CameraResponse::Srgb();
   options.body.marker_size_m = inputs.sticker_size_m;
   options.room_frame_position_sigma_mm = inputs.room_frame_position_sigma_mm.value_or(0.0);
+  options.scan_landmark_sigma_mm = inputs.scan_landmark_sigma_mm;
   options.room_frame_rotation_sigma_deg = inputs.room_frame_rotation_sigma_deg.value_or(0.0);
   return options;
 }

@@ -42,7 +42,11 @@ struct TrackingInputs {
   RoomMapId room_map_id;
   BodyMarkerMapId body_marker_map_id;
   AlignmentId alignment_id;
+  /// The plan's room map with, first among its landmarks, those the
+  /// session's body scan placed around the couch (scan_landmarks.h).
   RoomMap room_map;
+  int scan_landmarks = 0;
+  double scan_landmark_sigma_mm = 0;  ///< their placement in the room (1 sigma)
   TriangleMesh model;
   Rigid3d room_from_model_target;
   /// The session's stickers in the model frame:

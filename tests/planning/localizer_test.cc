@@ -16,6 +16,7 @@
 #include "planning/planning_test_util.h"
 #include "room_map/camera_localizer.h"
 #include "room_map/plan_stage.h"
+#include "room_map/scan_landmarks.h"
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
 #include "util/file.h"
@@ -472,6 +473,74 @@ TEST(Localizer, LandmarksPlacedAfterTheAdjustmentHelpKeypointOnlyFrames) {
   if (few_ok == more_ok) {
     EXPECT_LT(more_mean, few_mean);
   }
+}
+
+// Landmarks a body scan placed (RoomMap::scan_landmarks) are for frames the
+// room map alone does not place: with the room's own landmarks in view the
+// poses are the room map's, to the bit, and none of the scan's is used; a
+// map whose every landmark came from the scan places the frames only through
+// that fallback, and not at all with it turned off.
+TEST(Localizer, TheScansLandmarksPlaceOnlyWhatTheRoomMapDoesNot) {
+  const auto& c = GetSmallCase();
+  const RoomMap& room = GetSmallCaseMap().map;
+  // The room's landmarks as a scan would store them.
+  ScanLandmarks copy;
+  copy.points_in_room = room.landmarks_in_room;
+  copy.descriptors = room.landmark_descriptors.clone();
+  copy.spread_m = 0.002;
+  BodyMarkerMapRecord record;
+  ToRecord(copy, &record);
+  RoomMap both = room;
+  ASSERT_EQ(AddScanLandmarks(record, &both), room.num_landmarks());
+  RoomMap scan_only = room;
+  scan_only.landmarks_in_room.clear();
+  scan_only.landmark_descriptors = cv::Mat();
+  AddScanLandmarks(record, &scan_only);
+  ASSERT_EQ(scan_only.scan_landmarks, scan_only.num_landmarks());
+  EXPECT_TRUE(both.Validate().empty() && scan_only.Validate().empty());
+
+  const auto& [name, dir] = c.folder.tracking.at(0);
+  const Sequence seq = Sequence::Open(dir);
+  const auto gt = *seq.CameraGroundTruth();
+  CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
+  options.use_markers = false;  // keypoints alone
+  CameraLocalizerOptions without = options;
+  without.use_scan_landmarks = false;
+  CameraLocalizer on_room(room, c.folder.config.camera, options),
+      on_both(both, c.folder.config.camera, options),
+      on_scan(scan_only, c.folder.config.camera, options),
+      scan_off(scan_only, c.folder.config.camera, without);
+  const size_t n = std::min<size_t>(seq.size(), 40);
+  int room_ok = 0, scan_ok = 0;
+  double room_mm = 0, scan_mm = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const RgbdFrame frame = seq.LoadFrame(i, c.folder.config.camera);
+    const LocalizationResult a = on_room.Localize(frame), b = on_both.Localize(frame),
+                             s = on_scan.Localize(frame);
+    EXPECT_FALSE(scan_off.Localize(frame).ok) << "frame " << i;
+    ASSERT_EQ(a.ok, b.ok) << "frame " << i;
+    EXPECT_EQ(b.scan_keypoints_used, 0) << "frame " << i;
+    if (a.ok) {
+      EXPECT_LT(ComputePoseError(a.room_from_camera, b.room_from_camera).translation_mm, 1e-6)
+          << "frame " << i;
+      room_mm += ComputePoseError(gt[i].room_from_x, a.room_from_camera).translation_mm;
+      ++room_ok;
+    }
+    if (s.ok) {
+      EXPECT_EQ(s.scan_keypoints_used, s.keypoints_used) << "frame " << i;
+      EXPECT_GT(s.keypoints_used, 0);
+      scan_mm += ComputePoseError(gt[i].room_from_x, s.room_from_camera).translation_mm;
+      ++scan_ok;
+    }
+  }
+  std::cout << "room map: " << room_ok << " of " << n << " frames, "
+            << room_mm / std::max(1, room_ok)
+            << " mm mean; its landmarks as the scan's: " << scan_ok << " frames, "
+            << scan_mm / std::max(1, scan_ok) << " mm mean\n";
+  ASSERT_GT(room_ok, 0);
+  EXPECT_GE(scan_ok, room_ok * 9 / 10);
+  // Weighted as 2 mm landmarks they place the camera a little differently.
+  if (scan_ok > 0) EXPECT_LT(scan_mm / scan_ok, room_mm / room_ok + 2.0);
 }
 
 // Through a lens with distortion the keypoints sit where the lens puts

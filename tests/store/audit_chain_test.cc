@@ -204,8 +204,9 @@ TEST(AuditChain, AnApprovalOrASessionEndWrittenPastTheProgramIsNamed) {
       << Verify(unlocked).ToText();
 }
 
-// The breathing a session measured (schema 9) is part of its body marker
-// map's sealed row: changing a sticker's motion or the moving surface with
+// The breathing a session measured (schema 9) and the room landmarks its
+// scan placed (schema 11) are part of its body marker map's sealed row:
+// changing a sticker's motion, the moving surface or the landmarks with
 // sqlite3 is named; a map without them seals as before.
 TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
   TempDir dir;
@@ -222,6 +223,8 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
       if (breathing) {
         map.surface_patch_m = 0.04;
         map.moving_surface_patches = {{0.02, -0.1, 0.06}};
+        map.room_landmarks.points = {{1.1f, -1.5f, 3.0f}, {0.2f, -0.4f, 2.5f}};
+        map.room_landmark_descriptors = ByteMatrix::Constant(2, 32, 17);
       }
       const BodyMarkerMapId id = db->AddBodyMarkerMap(map);
       db->AppendAudit({AuditId(), 0, "ana (therapist)", "add_body_marker_map",
@@ -244,6 +247,11 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
   RawExec(surface, "DELETE FROM body_surface_motion WHERE body_marker_map_id = 1");
   EXPECT_NE(Verify(surface).ToText().find("body_marker_map:1 differs from what audit entry"), std::string::npos)
       << Verify(surface).ToText();
+  const fs::path landmarks = CopyOf(path, "landmarks.db");
+  RawExec(landmarks, "DELETE FROM body_scan_landmarks WHERE body_marker_map_id = 1");
+  EXPECT_NE(Verify(landmarks).ToText().find("body_marker_map:1 differs from what audit entry"),
+            std::string::npos)
+      << Verify(landmarks).ToText();
   // A motion row added to the map that had none.
   const fs::path added = CopyOf(path, "added.db");
   RawExec(added, "INSERT INTO body_marker_motion VALUES (2, 102, 0.002)");

@@ -142,6 +142,15 @@ FullStore WriteFullStore(Database& database, unsigned seed) {
   }
   s.body_marker_map.surface_patch_m = 0.04;
   s.body_marker_map.moving_surface_patches = {{0.02, -0.1, 0.06}, {-0.02, -0.1, 0.1}};
+  s.body_marker_map.room_landmarks.points = {
+      {1.2f, -0.7f, 2.9f}, {0.4f, -1.5f, 3.3f}, {2.0f, 0.3f, 3.1f}};
+  s.body_marker_map.room_landmark_descriptors.resize(3, 32);
+  s.body_marker_map.room_landmarks_placement_sigma_m = 0.0009;
+  s.body_marker_map.room_landmarks_position_sigma_m = 0.0025;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 32; ++c)
+      s.body_marker_map.room_landmark_descriptors(r, c) = static_cast<std::uint8_t>(7 * r + c);
+  }
   s.body_marker_map.mean_residual_px = 0.4;
   s.body_marker_map.max_residual_px = 1.1;
   s.body_marker_map.created_unix_ms = 1700000102000;
@@ -356,6 +365,12 @@ void ExpectFullStoreEq(Database& database, const FullStore& s) {
   for (std::size_t i = 0; i < s.body_marker_map.moving_surface_patches.size(); ++i) {
     EXPECT_EQ(body_map->moving_surface_patches[i], s.body_marker_map.moving_surface_patches[i]);
   }
+  ExpectCloudEq(s.body_marker_map.room_landmarks, body_map->room_landmarks);
+  EXPECT_EQ(body_map->room_landmark_descriptors, s.body_marker_map.room_landmark_descriptors);
+  EXPECT_EQ(body_map->room_landmarks_placement_sigma_m,
+            s.body_marker_map.room_landmarks_placement_sigma_m);
+  EXPECT_EQ(body_map->room_landmarks_position_sigma_m,
+            s.body_marker_map.room_landmarks_position_sigma_m);
 
   const auto reconstruction = database.GetReconstruction(s.reconstruction.id);
   ASSERT_TRUE(reconstruction.has_value());
