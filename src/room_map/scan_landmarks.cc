@@ -69,6 +69,8 @@ std::string ScanLandmarkOptions::Validate() const {
 ScanLandmarks PlaceScanLandmarks(const std::vector<ScanLandmarkFrame>& frames,
                                  const CameraIntrinsics& K, const ScanLandmarkOptions& options,
                                  const RoomMap* room_map) {
+  const std::string problem = options.Validate();
+  ARPOS_CHECK(problem.empty(), "invalid scan landmark options: " << problem);
   ScanLandmarks out;
   out.descriptors = cv::Mat(0, kDescriptorBytes, CV_8UC1);
   out.frames = static_cast<int>(frames.size());
