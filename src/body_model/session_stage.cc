@@ -197,15 +197,14 @@ std::string SessionStageResult::Summary() const {
   }
   out << RoomPlacementText() << "\n";
   if (scan_landmarks.frames > 0) {
-    out << StringPrintf(
-        "room landmarks the scan sees, for tracking: %d new to the room map (of %d keypoints seen "
-        "in "
-        "enough of %d frames; %d the map holds), outside the couch and the patient, each to %.1f "
-        "mm, "
-        "in the room as the scan is (%.2f mm)\n",
-        scan_landmarks.size(), scan_landmarks.groups, scan_landmarks.frames,
-        scan_landmarks.duplicates, 1000 * scan_landmarks.spread_m,
-        1000 * scan_landmarks.placement_sigma_m);
+    out << StringPrintf("room landmarks the scan sees, for tracking: %d new to the room map ",
+                        scan_landmarks.size())
+        << StringPrintf("(of %d keypoints seen in enough of %d frames; %d the map holds), ",
+                        scan_landmarks.groups, scan_landmarks.frames, scan_landmarks.duplicates)
+        << StringPrintf(
+               "outside the couch and the patient, each to %.1f mm, in the room as the scan is "
+               "(%.2f mm)\n",
+               1000 * scan_landmarks.spread_m, 1000 * scan_landmarks.placement_sigma_m);
   }
   if (surface_motion.frames > 0) out << SurfaceMotionText() << "\n";
   if (sticker_reading_distance_m > 0) {
@@ -432,7 +431,11 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     t_recon += SecondsSince(t0);
     if (options.scan_landmarks && for_markers && !frame.depth.empty()) {
       t0 = Clock::now();
-      cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+      if (frame.color.channels() == 3) {
+        cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
+      } else {
+        gray = frame.color;
+      }
       keypoint_extractor.Extract(gray, frame.depth, camera.depth_scale, &f.keypoints);
       t_landmarks += SecondsSince(t0);
     }
