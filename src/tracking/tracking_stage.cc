@@ -519,6 +519,9 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
           ? StringPrintf("%.3f mm, %.4f deg", tracker_options.room_frame_position_sigma_mm,
                          tracker_options.room_frame_rotation_sigma_deg).c_str()
           : "unknown");
+  run.options += StringPrintf(
+      "scan_landmarks: %d (placed to %.2f mm, for frames the room map does not place)\n",
+      inputs.scan_landmarks, inputs.scan_landmark_sigma_mm);
   run.summary = result.Summary();
   database->WithTransaction([&] {
     if (options.recording_id) {
