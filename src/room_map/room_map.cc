@@ -71,6 +71,22 @@ double MarkerCornerSigmaPx(const MarkerObservation& observation, int corner, dou
   return base * (1 + ratio * ratio);
 }
 
+ByteMatrix DescriptorsToBytes(const cv::Mat& descriptors) {
+  ByteMatrix bytes(descriptors.rows, kDescriptorBytes);
+  for (int r = 0; r < descriptors.rows; ++r) {
+    std::copy_n(descriptors.ptr<std::uint8_t>(r), kDescriptorBytes, bytes.row(r).data());
+  }
+  return bytes;
+}
+
+cv::Mat DescriptorsFromBytes(const ByteMatrix& bytes) {
+  cv::Mat descriptors(static_cast<int>(bytes.rows()), kDescriptorBytes, CV_8UC1);
+  for (int r = 0; r < descriptors.rows; ++r) {
+    std::copy_n(bytes.row(r).data(), kDescriptorBytes, descriptors.ptr<std::uint8_t>(r));
+  }
+  return descriptors;
+}
+
 RoomMapRecord ToRecord(const RoomMap& map, PlanId plan, std::optional<RecordingId> recording) {
   const std::string problem = map.Validate();
   ARPOS_CHECK(problem.empty(), "cannot store an inconsistent room map: " << problem);
@@ -91,13 +107,8 @@ RoomMapRecord ToRecord(const RoomMap& map, PlanId plan, std::optional<RecordingI
   record.max_residual_px = std::max(map.max_residual_px, map.mean_residual_px);
   record.landmarks_in_room.points.reserve(map.landmarks_in_room.size());
   for (const auto& p : map.landmarks_in_room) record.landmarks_in_room.points.push_back(p.cast<float>());
-  if (!map.landmarks_in_room.empty()) {
-    record.landmark_descriptors.resize(map.landmark_descriptors.rows, kDescriptorBytes);
-    for (int r = 0; r < map.landmark_descriptors.rows; ++r) {
-      std::copy_n(map.landmark_descriptors.ptr<std::uint8_t>(r), kDescriptorBytes,
-                  record.landmark_descriptors.row(r).data());
-    }
-  }
+  if (!map.landmarks_in_room.empty())
+    record.landmark_descriptors = DescriptorsToBytes(map.landmark_descriptors);
   record.camera_response = map.camera_response.Serialize();
   record.depth_correction = map.depth_correction.Serialize();
   if (!map.surface.empty()) {
@@ -148,13 +159,7 @@ RoomMap FromRecord(const RoomMapRecord& record) {
   }
   map.landmarks_in_room.reserve(points.size());
   for (const auto& p : points) map.landmarks_in_room.push_back(p.cast<double>());
-  if (!points.empty()) {
-    map.landmark_descriptors.create(static_cast<int>(points.size()), kDescriptorBytes, CV_8UC1);
-    for (int r = 0; r < map.landmark_descriptors.rows; ++r) {
-      std::copy_n(record.landmark_descriptors.row(r).data(), kDescriptorBytes,
-                  map.landmark_descriptors.ptr<std::uint8_t>(r));
-    }
-  }
+  if (!points.empty()) map.landmark_descriptors = DescriptorsFromBytes(record.landmark_descriptors);
   // Empty: a map stored before the store kept these (schema version 4); the
   // RoomMap defaults are what such a map was used with.
   const std::string where = "room map " + std::to_string(record.id.value());

@@ -122,6 +122,11 @@ std::array<Eigen::Vector3d, 4> MarkerCornersInRoom(const Rigid3d& room_from_mark
 double MarkerCornerSigmaPx(const MarkerObservation& observation, int corner, double floor_px,
                            double reference_cell_px, int cells_per_side = 6);
 
+/// ORB descriptors (CV_8UC1, kDescriptorBytes columns) as the store keeps
+/// them, and back; row for row.
+ByteMatrix DescriptorsToBytes(const cv::Mat& descriptors);
+cv::Mat DescriptorsFromBytes(const ByteMatrix& bytes);
+
 /// Converts for the store; `plan` becomes the record's plan_id.
 RoomMapRecord ToRecord(const RoomMap& map, PlanId plan,
                        std::optional<RecordingId> recording = std::nullopt);

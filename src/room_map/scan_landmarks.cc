@@ -201,11 +201,7 @@ void ToRecord(const ScanLandmarks& landmarks, BodyMarkerMapRecord* record) {
   record->room_landmarks_position_sigma_m = landmarks.spread_m;
   for (const Eigen::Vector3d& p : landmarks.points_in_room)
     record->room_landmarks.points.push_back(p.cast<float>());
-  record->room_landmark_descriptors.resize(landmarks.size(), kDescriptorBytes);
-  for (int r = 0; r < landmarks.size(); ++r) {
-    std::copy_n(landmarks.descriptors.ptr<std::uint8_t>(r), kDescriptorBytes,
-                record->room_landmark_descriptors.row(r).data());
-  }
+  record->room_landmark_descriptors = DescriptorsToBytes(landmarks.descriptors);
 }
 
 int AddScanLandmarks(const BodyMarkerMapRecord& record, RoomMap* map) {
@@ -228,11 +224,7 @@ int AddScanLandmarks(const BodyMarkerMapRecord& record, RoomMap* map) {
     points.push_back(p.cast<double>());
   }
   points.insert(points.end(), map->landmarks_in_room.begin(), map->landmarks_in_room.end());
-  cv::Mat rows(static_cast<int>(stored.size()), kDescriptorBytes, CV_8UC1);
-  for (int r = 0; r < rows.rows; ++r) {
-    std::copy_n(record.room_landmark_descriptors.row(r).data(), kDescriptorBytes,
-                rows.ptr<std::uint8_t>(r));
-  }
+  cv::Mat rows = DescriptorsFromBytes(record.room_landmark_descriptors);
   if (!map->landmark_descriptors.empty()) rows.push_back(map->landmark_descriptors);
   map->landmarks_in_room = std::move(points);
   map->landmark_descriptors = rows;
