@@ -322,6 +322,8 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
     // What the scan measured of the breathing, which tracking allows for.
     for (const BodyMarkerMapRecord& m : r.body_marker_maps) {
       h << "<p>Breathing (map " << std::to_string(m.id.value()) << "): " << E(DescribeBreathing(m)) << ".</p>\n";
+      h << "<p>Room landmarks the scan placed (map " << std::to_string(m.id.value())
+        << "): " << E(DescribeScanLandmarks(m)) << ".</p>\n";
     }
   }
 

@@ -130,6 +130,20 @@ std::string DescribeBreathing(const BodyMarkerMapRecord& map) {
                                  1000 * map.surface_patch_m);
 }
 
+std::string DescribeScanLandmarks(const BodyMarkerMapRecord& map) {
+  const std::size_t n = map.room_landmarks.points.size();
+  if (n == 0) {
+    return "none (the scan's place in the room was not known well enough, it saw too little of the "
+           "room "
+           "outside the couch, or the map was stored before the scan placed any)";
+  }
+  return StringPrintf(
+      "%zu keypoint(s) around the couch, which tracking uses only for frames the room map does not "
+      "place; in "
+      "the room as the scan was placed (%.1f mm at the stickers, 1 sigma), each to %.1f mm",
+      n, 1000 * map.room_landmarks_placement_sigma_m, 1000 * map.room_landmarks_position_sigma_m);
+}
+
 std::string VerificationLine(const AuditVerification& v) {
   std::string line;
   if (v.ok()) {

@@ -126,4 +126,10 @@ std::string FormatVector3(const Eigen::Vector3d& v, int decimals);
 /// with the breathing (or the scan could not tell)".
 std::string DescribeBreathing(const BodyMarkerMapRecord& map);
 
+/// The room landmarks the body scan placed for tracking (room_map/scan_landmarks.h),
+/// for people: "323 keypoints around the couch, for frames the room map does not
+/// place; in the room as the scan was placed (2.1 mm at the stickers, 1 sigma),
+/// each to 4.6 mm", or why there are none.
+std::string DescribeScanLandmarks(const BodyMarkerMapRecord& map);
+
 }  // namespace arpos

@@ -124,6 +124,25 @@ TEST(SessionReport, SessionWithoutTrackingSaysSo) {
   EXPECT_NE(html.find("Audit log verifies"), std::string::npos);
 }
 
+TEST(SessionReport, TheScansRoomLandmarksAreDescribed) {
+  BodyMarkerMapRecord map;
+  EXPECT_NE(DescribeScanLandmarks(map).find("none ("), std::string::npos);
+  map.room_landmarks.points.assign(323, Eigen::Vector3f::Zero());
+  map.room_landmarks_placement_sigma_m = 0.00214;
+  map.room_landmarks_position_sigma_m = 0.0046;
+  const std::string text = DescribeScanLandmarks(map);
+  EXPECT_NE(text.find("323 keypoint(s)"), std::string::npos) << text;
+  EXPECT_NE(text.find("2.1 mm at the stickers"), std::string::npos) << text;
+  EXPECT_NE(text.find("each to 4.6 mm"), std::string::npos) << text;
+
+  // And the report says it for the session's map.
+  Fixture f;
+  const test::ReportStoreIds ids = test::WriteReportStore(*f.db);
+  const SessionReport r = GatherSessionReport(f.db.get(), ids.session, f.path);
+  const std::string html = RenderReportHtml(r, {}, ReportImageMode::kDataUri);
+  EXPECT_NE(html.find("Room landmarks the scan placed (map "), std::string::npos);
+}
+
 TEST(ReportHtml, EveryStoredTextIsEscaped) {
   Fixture f;
   test::ReportStoreOptions options;
