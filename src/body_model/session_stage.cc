@@ -168,7 +168,7 @@ std::string SessionStageResult::Summary() const {
       "reference model -> room at scan time: t = (%.2f, %.2f, %.2f) mm, r = (%.3f, %.3f, %.3f) "
       "deg\n"
       "times [s]: localisation %.2f, marker map %.2f, reconstruction %.2f, mesh %.2f, alignment "
-      "%.2f, room landmarks %.2f, store %.2f, total %.2f\n",
+      "%.2f, room landmarks %.2f, breathing directions %.2f, store %.2f, total %.2f\n",
       static_cast<long long>(session_id.value()), static_cast<long long>(plan_id.value()), frames,
       frames_considered, frames_localized, frames_posed_by_stickers, camera_response.c_str(),
       marker_map.markers.size(), marker_map.mean_rms_px, marker_map.rejected.size(),
@@ -189,7 +189,7 @@ std::string SessionStageResult::Summary() const {
       1000 * room_from_model.translation.x(), 1000 * room_from_model.translation.y(),
       1000 * room_from_model.translation.z(), r_deg.x(), r_deg.y(), r_deg.z(), times.localization_s,
       times.marker_map_s, times.reconstruction_s, times.mesh_s, times.alignment_s,
-      times.scan_landmarks_s, times.store_s, times.total_s);
+      times.scan_landmarks_s, times.sticker_motion_s, times.store_s, times.total_s);
   if (surface_offset_frames >= 3) {
     out << StringPrintf("room offset from %d room-localised frames registered to the reconstruction: %.2f mm at "
                         "the stickers\n",
@@ -207,6 +207,8 @@ std::string SessionStageResult::Summary() const {
                1000 * scan_landmarks.spread_m, 1000 * scan_landmarks.placement_sigma_m);
   }
   if (surface_motion.frames > 0) out << SurfaceMotionText() << "\n";
+  if (!sticker_motion.stickers.empty())
+    out << "breathing stickers: " << sticker_motion.Describe() << "\n";
   if (sticker_reading_distance_m > 0) {
     out << StringPrintf("stickers readable up to %.2f m from this camera (face-on)\n", sticker_reading_distance_m);
   }
@@ -397,6 +399,10 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     KeypointSet keypoints;                    ///< for the room landmarks the scan sees (step 7)
   };
   std::vector<ScanFrame> frames;
+  std::vector<BodyScanView> surface_views;  // the views the final sticker map is fitted to
+  BodyMarkerMapResult surface_views_map;    // that map, in their frame
+  std::vector<PointCloud>
+      surface_view_clouds;  // their depth (camera frame), when directions are measured
   KeypointExtractor keypoint_extractor(localizer_options.keypoints);
   cv::Mat gray;
   std::map<int, int> unmapped_reads;  // room marker id -> frames that read it, not in the map
@@ -632,10 +638,12 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     step("placing the stickers on the reconstruction", 0.66);
     const auto t_surface = Clock::now();
     std::vector<BodyScanView> views;
+    std::vector<PointCloud> clouds;
     for (ScanFrame& f : frames) {
       if (!f.posed || !f.sticker_cloud) continue;
       const ReconstructionFrameReport r =
           builder->RegisterFrame(*f.sticker_cloud, f.view.room_from_camera);
+      PointCloud cloud = std::move(*f.sticker_cloud);
       f.sticker_cloud.reset();
       if (!r.refined) continue;
       f.surface_pose = anchor.Inverse() * r.world_from_camera;
@@ -643,12 +651,18 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       BodyScanView v = f.view;
       v.room_from_camera = *f.surface_pose;
       views.push_back(v);
+      if (options.sticker_motion_directions) clouds.push_back(std::move(cloud));
     }
     BodyMarkerMapResult on_surface = BuildBodyMarkerMap(views, camera, map_options);
     result.frames_registered_for_stickers = static_cast<int>(views.size());
     if (static_cast<int>(on_surface.markers.size()) >= options.min_stickers) {
       result.stickers_on_surface = true;
       result.marker_map = std::move(on_surface);
+      // Kept, with the map as fitted to them, for the breathing stickers'
+      // directions once the surface says which moved (step 6).
+      surface_views = std::move(views);
+      surface_view_clouds = std::move(clouds);
+      surface_views_map = result.marker_map;
     }
     result.times.marker_map_s += SecondsSince(t_surface);
   }
@@ -923,6 +937,60 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       if (motion > 0 && motion < 0.05) result.sticker_motion_m[m.marker_id] = motion;
     }
   }
+  // Which way the moving stickers moved, from their corners in the views
+  // the sticker map is fitted to (sticker_motion.h): where determined, the
+  // direction and how far along it; else along the normal, as measured.
+  if (options.sticker_motion_directions && !result.sticker_motion_m.empty() &&
+      !surface_views.empty()) {
+    step("measuring which way the breathing stickers moved", 0.97);
+    const auto t_motion = Clock::now();
+    // The views placed again, each on the reference model's still surface
+    // (what the breathing did not move): registered to the reconstruction,
+    // which holds the chest at every phase, a view turns a little with the
+    // chest it sees, and the stickers' motion would be measured against
+    // that turn. Placed on the still anatomy, it is measured against the
+    // body. A view that does not settle there is left out.
+    const Rigid3d model_from_room = result.room_from_model.Inverse();
+    std::vector<size_t> still_points;
+    for (size_t i = 0; i < model_dense.size(); ++i) {
+      if (!result.surface_motion.IsMoving(model_dense.point3(i))) still_points.push_back(i);
+    }
+    const PointCloud model_still = model_dense.Select(still_points);
+    const KdTree still_tree(model_still);
+    // At most 40 views, spread over the scan; each view's depth cropped to
+    // the model's box (2 cm around it) before the registration.
+    Eigen::AlignedBox3d box = model_dense.Bounds();
+    box.min() -= Eigen::Vector3d::Constant(0.02);
+    box.max() += Eigen::Vector3d::Constant(0.02);
+    const size_t n_views = std::min(surface_views.size(), surface_view_clouds.size());
+    const size_t view_step = (n_views + 39) / 40;
+    std::vector<BodyScanView> on_still;
+    for (size_t k = 0; k < n_views; k += std::max<size_t>(1, view_step)) {
+      BodyScanView v = surface_views[k];
+      v.room_from_camera = room_offset * v.room_from_camera;
+      const Rigid3d model_from_camera = model_from_room * v.room_from_camera;
+      std::vector<size_t> near;
+      for (size_t i = 0; i < surface_view_clouds[k].size(); ++i) {
+        if (box.contains(model_from_camera * surface_view_clouds[k].point3(i))) near.push_back(i);
+      }
+      const RegistrationResult r = RefineOnModel(surface_view_clouds[k].Select(near), model_still,
+                                                 still_tree, model_from_camera, options.threads);
+      if (!r.converged || r.num_inliers < 500) continue;
+      v.room_from_camera = result.room_from_model * r.target_from_source;
+      on_still.push_back(std::move(v));
+    }
+    for (auto& m : surface_views_map.markers) m.room_from_marker = room_offset * m.room_from_marker;
+    StickerMotionOptions motion_options;
+    motion_options.marker_size_m = sticker_size;
+    result.sticker_motion = EstimateStickerMotion(on_still, surface_views_map, camera,
+                                                  result.sticker_motion_m, motion_options);
+    for (const StickerMotionEstimate& e : result.sticker_motion.stickers) {
+      if (!e.ok || !(e.motion_m > 0 && e.motion_m < 0.05)) continue;
+      result.sticker_motion_direction[e.marker_id] = e.direction_in_marker;
+      result.sticker_motion_m[e.marker_id] = e.motion_m;
+    }
+    result.times.sticker_motion_s = SecondsSince(t_motion);
+  }
   return result;
 }
 
@@ -987,8 +1055,13 @@ void StoreSession(Database* database, const CaseFolder& folder, const SessionSta
     map.marker_size_m = folder.config.body_markers.size_m;
     for (const auto& m : result->marker_map.markers) {
       const auto motion = result->sticker_motion_m.find(m.marker_id);
+      const auto direction = result->sticker_motion_direction.find(m.marker_id);
       map.markers.push_back({m.marker_id, m.room_from_marker, m.rms_px, m.num_views,
-                             motion != result->sticker_motion_m.end() ? motion->second : 0.0});
+                             motion != result->sticker_motion_m.end() ? motion->second : 0.0,
+                             motion != result->sticker_motion_m.end() &&
+                                     direction != result->sticker_motion_direction.end()
+                                 ? direction->second
+                                 : Eigen::Vector3d::UnitZ()});
     }
     map.surface_patch_m = result->surface_motion.patch_m;
     map.moving_surface_patches = result->surface_motion.MovingPatchCentres();

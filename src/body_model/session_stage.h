@@ -45,6 +45,7 @@
 #include <vector>
 
 #include "body_model/body_marker_map.h"
+#include "body_model/sticker_motion.h"
 #include "body_model/surface_motion.h"
 #include "controllers/controller.h"
 #include "geometry/rigid3.h"
@@ -119,6 +120,10 @@ struct SessionStageOptions {
   /// reconstruction's points.
   bool align_on_still_surface = true;
   double min_still_surface_share = 0.3;
+  /// Breathing: measure which way each moving sticker moved, from its
+  /// corners in the scan's views (sticker_motion.h); where it cannot be
+  /// told, or off, a sticker moves along its normal.
+  bool sticker_motion_directions = true;
   int poisson_depth = 8;
   /// Room landmarks the scan sees (room_map/scan_landmarks.h), stored with
   /// the body marker map for tracking: at most this many (they come first
@@ -132,7 +137,7 @@ struct SessionStageOptions {
 
 struct SessionStepTimes {
   double localization_s = 0, marker_map_s = 0, reconstruction_s = 0, mesh_s = 0, alignment_s = 0,
-         scan_landmarks_s = 0, store_s = 0, total_s = 0;
+         scan_landmarks_s = 0, sticker_motion_s = 0, store_s = 0, total_s = 0;
 };
 
 /// The final camera pose of one considered body-scan frame and where it
@@ -208,6 +213,11 @@ struct SessionStageResult {
   /// SurfaceMotion::MotionAt its centre). Stored with the body marker map
   /// for tracking.
   std::map<int, double> sticker_motion_m;
+  /// Which way they moved (sticker_motion.h): a unit direction in the
+  /// sticker's frame per sticker whose direction the scan determined (the
+  /// others along their normals), and the measurement's summary.
+  std::map<int, Eigen::Vector3d> sticker_motion_direction;
+  StickerMotion sticker_motion;
   /// What the user should know (a weakly placed scan, stickers too small for
   /// the tracking distance), with what to do.
   std::vector<std::string> warnings;

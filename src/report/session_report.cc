@@ -121,11 +121,23 @@ std::string DescribeBreathing(const BodyMarkerMapRecord& map) {
   if (ids.empty() && map.moving_surface_patches.empty()) {
     return "no sticker or surface patch moved with the breathing (or the scan could not tell)";
   }
+  int directed = 0, moving = 0;
+  for (const BodyMarker& m : map.markers) {
+    if (!(m.motion_m > 0)) continue;
+    ++moving;
+    if (!m.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) ++directed;
+  }
+  const std::string along = directed == 0        ? "along their normals"
+                            : directed == moving ? "each along the direction the scan measured"
+                                                 : StringPrintf(
+                                                       "along the direction the scan measured for "
+                                                       "%d of them, the others along their normals",
+                                                       directed);
   const std::string stickers =
       ids.empty() ? "no sticker moved with the breathing"
                   : (ids.find(',') == std::string::npos ? "sticker " : "stickers ") + ids +
-                        StringPrintf(" moved with the breathing (%.1f-%.1f mm, 1 sigma along their normals)",
-                                     1000 * lo, 1000 * hi);
+                        StringPrintf(" moved with the breathing (%.1f-%.1f mm, 1 sigma %s)",
+                                     1000 * lo, 1000 * hi, along.c_str());
   return stickers + StringPrintf("; %zu surface patches of %.0f mm moved", map.moving_surface_patches.size(),
                                  1000 * map.surface_patch_m);
 }

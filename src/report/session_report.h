@@ -121,7 +121,8 @@ const char* ReportProgramVersion();
 std::string FormatVector3(const Eigen::Vector3d& v, int decimals);
 
 /// What the body scan measured of the breathing, for people: "stickers 107,
-/// 125 moved with the breathing (1.1-1.3 mm, 1 sigma along their normals);
+/// 125 moved with the breathing (1.1-1.3 mm, 1 sigma each along the direction the
+/// scan measured);
 /// 84 surface patches of 4 cm moved", or "no sticker or surface patch moved
 /// with the breathing (or the scan could not tell)".
 std::string DescribeBreathing(const BodyMarkerMapRecord& map);

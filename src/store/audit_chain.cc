@@ -161,6 +161,11 @@ std::string AuditedRowHash(sqlite3* db, const std::string& entity) {
       AppendRows(db, "SELECT * FROM body_surface_motion WHERE body_marker_map_id = ?1", id, &data);
       // Schema 11; a map without scan landmarks hashes as before.
       AppendRows(db, "SELECT * FROM body_scan_landmarks WHERE body_marker_map_id = ?1", id, &data);
+      // Schema 12; a map without direction rows hashes as before.
+      AppendRows(db,
+                 "SELECT * FROM body_marker_motion_direction WHERE body_marker_map_id = ?1 ORDER "
+                 "BY marker_id",
+                 id, &data);
     } else if (kind == "tracking_run") {
       AppendRows(db, "SELECT * FROM tracking_frames WHERE tracking_run_id = ?1 ORDER BY frame_index", id, &data);
     }

@@ -234,6 +234,10 @@ struct BodyMarker {
   /// How far the sticker moved along its normal with the breathing during
   /// the scan (1 sigma, m; 0: it did not, or nothing could be told).
   double motion_m = 0;
+  /// Which way it moved, a unit vector in the sticker's own frame
+  /// (body_model/sticker_motion.h); (0, 0, 1), its normal, where the scan
+  /// could not tell (and for maps stored before schema version 12).
+  Eigen::Vector3d motion_direction = Eigen::Vector3d::UnitZ();
 };
 
 struct BodyMarkerMapRecord {

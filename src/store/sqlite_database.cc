@@ -729,6 +729,21 @@ BodyMarkerMapId SqliteDatabase::AddBodyMarkerMap(const BodyMarkerMapRecord& map)
       m->BindInt64(2, marker.marker_id);
       m->BindDouble(3, marker.motion_m);
       m->Execute();
+      if (!marker.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) {
+        const Eigen::Vector3d& d = marker.motion_direction;
+        ARPOS_CHECK(d.allFinite() && std::abs(d.squaredNorm() - 1) < 1e-9,
+                    "body marker map: sticker " << marker.marker_id
+                                                << "'s motion direction is not a unit vector");
+        SqliteStatementGuard dir(Prepared(
+            "INSERT INTO body_marker_motion_direction (body_marker_map_id, marker_id, x, y, z) "
+            "VALUES (?1, ?2, ?3, ?4, ?5)"));
+        dir->BindId(1, id);
+        dir->BindInt64(2, marker.marker_id);
+        dir->BindDouble(3, d.x());
+        dir->BindDouble(4, d.y());
+        dir->BindDouble(5, d.z());
+        dir->Execute();
+      }
     }
   }
   if (!map.moving_surface_patches.empty()) {
@@ -810,6 +825,19 @@ std::optional<BodyMarkerMapRecord> SqliteDatabase::GetBodyMarkerMap(BodyMarkerMa
       const int marker_id = static_cast<int>(m->ColumnInt64(0));
       for (BodyMarker& marker : map.markers) {
         if (marker.marker_id == marker_id) marker.motion_m = m->ColumnDouble(1);
+      }
+    }
+  }
+  {
+    SqliteStatementGuard m(
+        Prepared("SELECT marker_id, x, y, z FROM body_marker_motion_direction WHERE "
+                 "body_marker_map_id = ?1"));
+    m->BindId(1, id);
+    while (m->Step()) {
+      const int marker_id = static_cast<int>(m->ColumnInt64(0));
+      const Eigen::Vector3d d(m->ColumnDouble(1), m->ColumnDouble(2), m->ColumnDouble(3));
+      for (BodyMarker& marker : map.markers) {
+        if (marker.marker_id == marker_id) marker.motion_direction = d.normalized();
       }
     }
   }

@@ -42,6 +42,11 @@ std::string BodyTrackerOptions::Validate() const {
   for (const auto& [id, motion] : sticker_motion_m) {
     if (!(motion >= 0 && motion < 0.05)) return "sticker_motion_m of sticker " + std::to_string(id) + " must be in [0, 5 cm)";
   }
+  for (const auto& [id, direction] : sticker_motion_direction) {
+    if (!direction.allFinite() || !(std::abs(direction.norm() - 1) < 1e-6)) {
+      return "sticker_motion_direction of sticker " + std::to_string(id) + " must be a unit vector";
+    }
+  }
   if (!(shared_breathing_sigmas >= 0 && std::isfinite(shared_breathing_sigmas))) {
     return "shared_breathing_sigmas must be finite and not negative";
   }
@@ -103,6 +108,7 @@ struct SeenSticker {
   Rigid3d marker_from_model;
   double motion_m = 0;                 ///< breathing along its normal (1 sigma)
   Eigen::Vector3d normal_in_model = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d motion_in_model = Eigen::Vector3d::UnitZ();  ///< which way it breathes (unit)
 };
 
 // A sticker observation from an edge-line refinement started at `initial`.
@@ -487,6 +493,10 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
       s.id = obs.id;
       s.marker_from_model = it->second.Inverse();
       s.normal_in_model = it->second.rotation * Eigen::Vector3d::UnitZ();
+      const auto direction = o.sticker_motion_direction.find(obs.id);
+      s.motion_in_model = direction != o.sticker_motion_direction.end()
+                              ? it->second.rotation * direction->second
+                              : s.normal_in_model;
       if (const auto motion = o.sticker_motion_m.find(obs.id); motion != o.sticker_motion_m.end()) {
         s.motion_m = motion->second;
       }
@@ -617,10 +627,10 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
         if (!use[si]) continue;
         const SeenSticker& s = stickers[si];
         // The sticker's whitened corner residuals (up to 8 rows), their
-        // Jacobian, and how they move with the sticker along its normal.
+        // Jacobian, and how they move with the sticker as it breathes.
         StickerResiduals r = StickerResiduals::Zero(), b = StickerResiduals::Zero();
         StickerJacobian J = StickerJacobian::Zero();
-        const Eigen::Vector3d normal = pose.rotation * s.normal_in_model;
+        const Eigen::Vector3d rise = pose.rotation * s.motion_in_model;
         int rows = 0;
         for (int c = 0; c < 4; ++c) {
           const Eigen::Vector3d p = pose * s.corners_in_model[c];
@@ -637,7 +647,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
           const double sw = std::sqrt(norm <= o.huber_sigmas ? 1.0 : o.huber_sigmas / norm);
           r.segment<2>(rows) = sw * rc;
           J.middleRows<2>(rows) = sw * dproj * dp;
-          b.segment<2>(rows) = sw * dproj * normal;
+          b.segment<2>(rows) = sw * dproj * rise;
           rows += 2;
           dof += 2;
         }

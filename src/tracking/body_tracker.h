@@ -116,6 +116,10 @@ struct BodyTrackerOptions {
   /// pose in that direction while a moving sticker still holds the others.
   /// Stickers not listed do not move.
   std::map<int, double> sticker_motion_m;
+  /// Which way each of them moves, a unit vector in the sticker's own frame,
+  /// where the session measured it (body_model/sticker_motion.h); a moving
+  /// sticker not listed moves along its normal, (0, 0, 1).
+  std::map<int, Eigen::Vector3d> sticker_motion_direction;
   /// ... and they rise together: one rise per frame, shared by the moving
   /// stickers (each by its motion_m times it), is estimated with the pose
   /// and left out of it (sticker_terms.h), with this prior (1 sigma, in

@@ -156,6 +156,9 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   for (const auto& m : markers->markers) {
     in.model_from_marker[m.marker_id] = model_from_body * m.body_from_marker;
     if (m.motion_m > 0) in.sticker_motion_m[m.marker_id] = m.motion_m;
+    if (m.motion_m > 0 && !m.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) {
+      in.sticker_motion_direction[m.marker_id] = m.motion_direction;
+    }
   }
   in.moving_surface_patches = markers->moving_surface_patches;
   in.surface_patch_m = markers->surface_patch_m;
@@ -325,6 +328,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   tracker_options.body.detector.edge.response = response.response;
   // Breathing, as the session measured it.
   tracker_options.body.sticker_motion_m = inputs.sticker_motion_m;
+  tracker_options.body.sticker_motion_direction = inputs.sticker_motion_direction;
   tracker_options.body.moving_surface_patches = inputs.moving_surface_patches;
   if (inputs.surface_patch_m > 0) tracker_options.body.moving_surface_patch_m = inputs.surface_patch_m;
   const DepthCorrection depth_correction = inputs.room_map.depth_correction;
@@ -522,6 +526,10 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   run.options += StringPrintf(
       "scan_landmarks: %d (placed to %.2f mm, for frames the room map does not place)\n",
       inputs.scan_landmarks, inputs.scan_landmark_sigma_mm);
+  run.options += StringPrintf(
+      "breathing_stickers: %zu (%zu with the direction the scan measured, the others along "
+      "their normals)\n",
+      inputs.sticker_motion_m.size(), inputs.sticker_motion_direction.size());
   run.summary = result.Summary();
   database->WithTransaction([&] {
     if (options.recording_id) {

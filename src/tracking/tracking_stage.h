@@ -57,6 +57,8 @@ struct TrackingInputs {
   /// moved along its normal (1 sigma, m), and the moving surface patches
   /// (model frame, cubes of `surface_patch_m`). Empty when nothing moved.
   std::map<int, double> sticker_motion_m;
+  /// ... and which way, where the session measured it (unit, sticker frame).
+  std::map<int, Eigen::Vector3d> sticker_motion_direction;
   std::vector<Eigen::Vector3d> moving_surface_patches;
   double surface_patch_m = 0;
   /// The patient's pose at the session's body scan (the alignment): where

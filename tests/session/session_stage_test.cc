@@ -2,6 +2,8 @@
 // sample session (small: 24 room, 8 body-scan frames).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 #include <filesystem>
@@ -459,6 +461,59 @@ TEST(SessionStage, RoomOffsetFromFramesRegisteredToTheSurface) {
   EXPECT_LT(std::abs(signed_mean), 3.0);
   EXPECT_NE(r.session_summary.find("room landmarks the scan sees, for tracking"),
             std::string::npos);
+}
+
+// A patient who breathes (5 mm peak to peak, the simulator lifting the
+// anterior torso along the model's -y): the session measures which way each
+// breathing sticker moved, stores it with the map, and it is the chest's
+// way, not the stickers' normals'.
+TEST(SessionStage, BreathingStickersMoveTheWayTheScanSawThem) {
+  TempDir dir;
+  sim::SimulationOptions o;
+  o.seed = 3;
+  o.room_walk = "couch";
+  o.room_frames = 24;
+  o.body_scan_frames = 40;
+  o.tracking_frames = 1;
+  o.tracking_sequences = 1;
+  o.breathing_mm = 5;
+  const fs::path case_dir = dir.path() / "case";
+  sim::Simulator(o).WriteCase(case_dir);
+  auto db = SqliteDatabase::Open((dir.path() / "store.db").string());
+  const RunCaseResult r = RunCase(case_dir, db.get(), dir.path() / "out");
+  ASSERT_TRUE(r.ok()) << r.Summary();
+  EXPECT_NE(r.session_summary.find("breathing stickers: directions of "), std::string::npos)
+      << r.session_summary;
+  const auto maps = db->ListBodyMarkerMapIds(r.session_id);
+  ASSERT_EQ(maps.size(), 1u);
+  const auto map = db->GetBodyMarkerMap(maps[0]);
+  ASSERT_TRUE(map.has_value());
+  const Rigid3d room_from_model =
+      ReadTrajectory(case_dir / "body_scan" / "body_groundtruth.txt").front().room_from_x;
+  const Eigen::Vector3d up = room_from_model.rotation * Eigen::Vector3d(0, -1, 0);
+  int moving = 0, directed = 0;
+  double normal_deg = 0, direction_deg = 0;
+  for (const BodyMarker& m : map->markers) {
+    if (!(m.motion_m > 0)) continue;
+    ++moving;
+    if (m.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) continue;
+    ++directed;
+    const Eigen::Vector3d normal = m.body_from_marker.rotation * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d direction = m.body_from_marker.rotation * m.motion_direction;
+    const double to_truth = std::acos(std::clamp(direction.dot(up), -1.0, 1.0)) * 180 / M_PI;
+    EXPECT_LT(to_truth, 15.0) << "sticker " << m.marker_id;
+    direction_deg += to_truth;
+    normal_deg += std::acos(std::clamp(normal.dot(up), -1.0, 1.0)) * 180 / M_PI;
+    EXPECT_GT(m.motion_m, 0.0005) << "sticker " << m.marker_id;
+    EXPECT_LT(m.motion_m, 0.004) << "sticker " << m.marker_id;
+  }
+  std::cout << moving << " breathing stickers, " << directed
+            << " with a direction: " << direction_deg / directed
+            << " deg from the chest's way on average, their normals " << normal_deg / directed
+            << " deg\n";
+  ASSERT_GE(moving, 3) << r.session_summary;
+  EXPECT_GE(directed, moving / 2) << r.session_summary;
+  EXPECT_LT(direction_deg, normal_deg);
 }
 
 // A body scan with no patient on the couch (the room recording put in its

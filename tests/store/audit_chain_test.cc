@@ -218,7 +218,8 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
       BodyMarkerMapRecord map;
       map.session_id = SessionId(1);
       map.marker_size_m = 0.03;
-      map.markers = {{101, Rigid3d::Identity(), 0.2, 10, breathing ? 0.0012 : 0.0},
+      map.markers = {{101, Rigid3d::Identity(), 0.2, 10, breathing ? 0.0012 : 0.0,
+                      breathing ? Eigen::Vector3d(0.6, 0.0, 0.8) : Eigen::Vector3d::UnitZ()},
                      {102, Rigid3d::Identity(), 0.2, 10, 0.0}};
       if (breathing) {
         map.surface_patch_m = 0.04;
@@ -234,6 +235,8 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
     ASSERT_TRUE(map.has_value());
     EXPECT_EQ(map->markers[0].motion_m, 0.0012);
     EXPECT_EQ(map->markers[1].motion_m, 0.0);
+    EXPECT_TRUE(map->markers[0].motion_direction.isApprox(Eigen::Vector3d(0.6, 0.0, 0.8)));
+    EXPECT_TRUE(map->markers[1].motion_direction.isApprox(Eigen::Vector3d::UnitZ()));
     ASSERT_EQ(map->moving_surface_patches.size(), 1u);
     EXPECT_TRUE(db->GetBodyMarkerMap(BodyMarkerMapId(2))->moving_surface_patches.empty());
   }
@@ -252,6 +255,12 @@ TEST(AuditChain, ABodyMarkerMapsBreathingIsSealedWithIt) {
   EXPECT_NE(Verify(landmarks).ToText().find("body_marker_map:1 differs from what audit entry"),
             std::string::npos)
       << Verify(landmarks).ToText();
+  const fs::path direction = CopyOf(path, "direction.db");
+  RawExec(direction,
+          "UPDATE body_marker_motion_direction SET x = 0.8, z = 0.6 WHERE marker_id = 101");
+  EXPECT_NE(Verify(direction).ToText().find("body_marker_map:1 differs from what audit entry"),
+            std::string::npos)
+      << Verify(direction).ToText();
   // A motion row added to the map that had none.
   const fs::path added = CopyOf(path, "added.db");
   RawExec(added, "INSERT INTO body_marker_motion VALUES (2, 102, 0.002)");

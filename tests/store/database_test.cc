@@ -735,12 +735,25 @@ TEST(SqliteDatabase, InfoAndDescriptionCountEveryTable) {
   EXPECT_GT(info.size_bytes, 0);
   std::set<std::string> tables;
   for (const auto& [table, count] : info.table_row_counts) tables.insert(table);
-  const std::set<std::string> expected = {
-      "alignments",         "audit_log",           "body_marker_maps", "body_marker_poses",
-      "body_marker_motion", "body_surface_motion", "patients",         "plans",
-      "reconstructions",    "recordings",          "room_maps",        "room_map_markers",
-      "room_map_surface",   "body_scan_landmarks", "sessions",         "tracking_frames",
-      "tracking_runs",      "session_activity"};
+  const std::set<std::string> expected = {"alignments",
+                                          "audit_log",
+                                          "body_marker_maps",
+                                          "body_marker_poses",
+                                          "body_marker_motion",
+                                          "body_surface_motion",
+                                          "patients",
+                                          "plans",
+                                          "reconstructions",
+                                          "recordings",
+                                          "room_maps",
+                                          "room_map_markers",
+                                          "room_map_surface",
+                                          "body_scan_landmarks",
+                                          "sessions",
+                                          "tracking_frames",
+                                          "tracking_runs",
+                                          "session_activity",
+                                          "body_marker_motion_direction"};
   EXPECT_EQ(tables, expected);
   EXPECT_EQ(info.RowCount("patients"), 1);
   EXPECT_EQ(info.RowCount("alignments"), 2);

@@ -138,6 +138,8 @@ FullStore WriteFullStore(Database& database, unsigned seed) {
     marker.residual_px = 0.4;
     marker.num_observations = 60;
     marker.motion_m = id == 105 ? 0.0012 : 0.0;  // one sticker moved with the breathing
+    if (id == 105)
+      marker.motion_direction = Eigen::Vector3d(0.0, 0.6, 0.8);  // which way it measured
     s.body_marker_map.markers.push_back(marker);
   }
   s.body_marker_map.surface_patch_m = 0.04;
@@ -359,6 +361,9 @@ void ExpectFullStoreEq(Database& database, const FullStore& s) {
     EXPECT_EQ(body_map->markers[i].residual_px, s.body_marker_map.markers[i].residual_px);
     EXPECT_EQ(body_map->markers[i].num_observations, s.body_marker_map.markers[i].num_observations);
     EXPECT_EQ(body_map->markers[i].motion_m, s.body_marker_map.markers[i].motion_m);
+    EXPECT_TRUE(body_map->markers[i].motion_direction.isApprox(
+        s.body_marker_map.markers[i].motion_direction, 1e-12))
+        << body_map->markers[i].motion_direction.transpose();
   }
   EXPECT_EQ(body_map->surface_patch_m, s.body_marker_map.surface_patch_m);
   ASSERT_EQ(body_map->moving_surface_patches.size(), s.body_marker_map.moving_surface_patches.size());
