@@ -7,6 +7,7 @@
 #include <Eigen/Dense>
 
 #include "features/edge_refinement.h"
+#include "features/marker_pose.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -31,10 +32,7 @@ bool ViewDisplacement(const BodyScanView& view, const BodyMarkerView& seen,
                       const Rigid3d& room_from_marker, const CameraIntrinsics& k,
                       const PixelUndistorter& undistorter, const StickerMotionOptions& o,
                       Displacement* out) {
-  const double h = o.marker_size_m / 2;
-  const std::array<Eigen::Vector3d, 4> corners_in_marker = {
-      Eigen::Vector3d(-h, h, 0), Eigen::Vector3d(h, h, 0), Eigen::Vector3d(h, -h, 0),
-      Eigen::Vector3d(-h, -h, 0)};
+  const std::array<Eigen::Vector3d, 4> corners_in_marker = MarkerCornersInMarker(o.marker_size_m);
   const Rigid3d camera_from_room = view.room_from_camera.Inverse();
   const Eigen::Matrix3d r_cr = camera_from_room.RotationMatrix();
   std::array<Eigen::Vector2d, 4> observed;
