@@ -286,11 +286,12 @@ StickerMotion EstimateStickerMotion(const std::vector<BodyScanView>& views,
         e.why_not =
             StringPrintf("its motion explains %.1f times the scatter it leaves, %.1f needed",
                          e.explained_ratio, options.min_explained_ratio);
-      } else if (!(std::abs(e.normal_share_m - surface_m) <=
-                   options.max_normal_disagreement * surface_m + 3 * normal_sigma_m)) {
+      } else if (!(normal_sigma_m <= options.max_normal_disagreement * surface_m) ||
+                 !(std::abs(e.normal_share_m - surface_m) <=
+                   options.max_normal_disagreement * surface_m + 2 * normal_sigma_m)) {
         e.why_not = StringPrintf(
-            "its motion along its normal (%.2f mm) disagrees with the surface's (%.2f mm)",
-            1000 * e.normal_share_m, 1000 * surface_m);
+            "its motion along its normal (%.2f +- %.2f mm) disagrees with the surface's (%.2f mm)",
+            1000 * e.normal_share_m, 1000 * normal_sigma_m, 1000 * surface_m);
       } else if (!(e.direction_sigma_deg <= options.max_direction_sigma_deg)) {
         e.why_not = StringPrintf("its direction uncertain by %.0f deg", e.direction_sigma_deg);
       } else {

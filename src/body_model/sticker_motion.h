@@ -65,7 +65,8 @@ struct StickerMotionOptions {
   double min_explained_ratio = 1.2;
   /// The motion's share along the sticker's normal must agree with what the
   /// depth of the surface under it measured (surface_motion.h), to this
-  /// fraction of that plus 3 of its own sigmas. A view's own pose error is
+  /// fraction of that plus 2 of its own sigmas, and be known to this
+  /// fraction of it. A view's own pose error is
   /// shared by the stickers it sees and fits as a time course too (as can a
   /// bias that changes with the viewpoint along the camera's path); the
   /// surface, measured by depth, does not share it.
