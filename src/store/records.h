@@ -231,8 +231,8 @@ struct BodyMarker {
   Rigid3d body_from_marker;
   double residual_px = 0;
   int num_observations = 0;
-  /// How far the sticker moved along its normal with the breathing during
-  /// the scan (1 sigma, m; 0: it did not, or nothing could be told).
+  /// How far the sticker moved with the breathing during the scan, along
+  /// `motion_direction` (1 sigma, m; 0: it did not, or nothing could be told).
   double motion_m = 0;
   /// Which way it moved, a unit vector in the sticker's own frame
   /// (body_model/sticker_motion.h); (0, 0, 1), its normal, where the scan

@@ -106,7 +106,7 @@ struct SeenSticker {
   std::array<double, 4> sigma_px{};
   MarkerPose single_view;
   Rigid3d marker_from_model;
-  double motion_m = 0;                 ///< breathing along its normal (1 sigma)
+  double motion_m = 0;  ///< breathing along motion_in_model (1 sigma)
   Eigen::Vector3d normal_in_model = Eigen::Vector3d::UnitZ();
   Eigen::Vector3d motion_in_model = Eigen::Vector3d::UnitZ();  ///< which way it breathes (unit)
 };

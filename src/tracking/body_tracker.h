@@ -110,11 +110,12 @@ struct BodyTrackerOptions {
   /// A sticker whose corner RMS exceeds this after the fit is dropped.
   double max_sticker_rms_px = 1.2;
   /// Breathing (from the session: body_model/surface_motion.h). Per sticker
-  /// id, how far it moves along its normal with the breathing (1 sigma, m):
-  /// its four corners share that uncertainty along the normal (marginalised
-  /// in the fit), so the still stickers and the still surface decide the
-  /// pose in that direction while a moving sticker still holds the others.
-  /// Stickers not listed do not move.
+  /// id, how far it moves with the breathing (1 sigma, m), along its normal
+  /// or along `sticker_motion_direction`: its four corners share that
+  /// uncertainty along that way (marginalised in the fit), so the still
+  /// stickers and the still surface decide the pose in that direction while
+  /// a moving sticker still holds the others. Stickers not listed do not
+  /// move.
   std::map<int, double> sticker_motion_m;
   /// Which way each of them moves, a unit vector in the sticker's own frame,
   /// where the session measured it (body_model/sticker_motion.h); a moving
