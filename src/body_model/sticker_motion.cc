@@ -147,8 +147,11 @@ StickerMotion EstimateStickerMotion(const std::vector<BodyScanView>& views,
   };
   std::vector<Sticker> stickers;
   for (const BodyMarkerEstimate& m : map.markers) {
-    if (normal_motion_m.count(m.marker_id))
-      stickers.push_back({m.marker_id, m.room_from_marker, {}, {}, {}, {}});
+    if (!normal_motion_m.count(m.marker_id)) continue;
+    Sticker s;  // c, v and the normal matrix start at zero
+    s.id = m.marker_id;
+    s.room_from_marker = m.room_from_marker;
+    stickers.push_back(std::move(s));
   }
   if (stickers.empty()) return out;
   std::vector<int> seen_in_view(views.size(), 0);

@@ -540,7 +540,9 @@ TEST(Localizer, TheScansLandmarksPlaceOnlyWhatTheRoomMapDoesNot) {
   ASSERT_GT(room_ok, 0);
   EXPECT_GE(scan_ok, room_ok * 9 / 10);
   // Weighted as 2 mm landmarks they place the camera a little differently.
-  if (scan_ok > 0) EXPECT_LT(scan_mm / scan_ok, room_mm / room_ok + 2.0);
+  if (scan_ok > 0) {
+    EXPECT_LT(scan_mm / scan_ok, room_mm / room_ok + 2.0);
+  }
 }
 
 // Through a lens with distortion the keypoints sit where the lens puts
