@@ -125,7 +125,7 @@ std::string DescribeBreathing(const BodyMarkerMapRecord& map) {
   for (const BodyMarker& m : map.markers) {
     if (!(m.motion_m > 0)) continue;
     ++moving;
-    if (!m.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) ++directed;
+    if (m.HasMotionDirection()) ++directed;
   }
   const std::string along = directed == 0        ? "along their normals"
                             : directed == moving ? "each along the direction the scan measured"
@@ -146,13 +146,12 @@ std::string DescribeScanLandmarks(const BodyMarkerMapRecord& map) {
   const std::size_t n = map.room_landmarks.points.size();
   if (n == 0) {
     return "none (the scan's place in the room was not known well enough, it saw too little of the "
-           "room "
-           "outside the couch, or the map was stored before the scan placed any)";
+           "room outside the couch, or the map was stored before the scan placed any)";
   }
   return StringPrintf(
       "%zu keypoint(s) around the couch, which tracking uses only for frames the room map does not "
-      "place; in "
-      "the room as the scan was placed (%.1f mm at the stickers, 1 sigma), each to %.1f mm",
+      "place; in the room as the scan was placed (%.1f mm at the stickers, 1 sigma), each to %.1f "
+      "mm",
       n, 1000 * map.room_landmarks_placement_sigma_m, 1000 * map.room_landmarks_position_sigma_m);
 }
 

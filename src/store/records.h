@@ -238,6 +238,10 @@ struct BodyMarker {
   /// (body_model/sticker_motion.h); (0, 0, 1), its normal, where the scan
   /// could not tell (and for maps stored before schema version 12).
   Eigen::Vector3d motion_direction = Eigen::Vector3d::UnitZ();
+  /// Whether the scan measured which way it moved (else: along its normal).
+  bool HasMotionDirection() const {
+    return !motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12);
+  }
 };
 
 struct BodyMarkerMapRecord {

@@ -729,7 +729,7 @@ BodyMarkerMapId SqliteDatabase::AddBodyMarkerMap(const BodyMarkerMapRecord& map)
       m->BindInt64(2, marker.marker_id);
       m->BindDouble(3, marker.motion_m);
       m->Execute();
-      if (!marker.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) {
+      if (marker.HasMotionDirection()) {
         const Eigen::Vector3d& d = marker.motion_direction;
         ARPOS_CHECK(d.allFinite() && std::abs(d.squaredNorm() - 1) < 1e-9,
                     "body marker map: sticker " << marker.marker_id

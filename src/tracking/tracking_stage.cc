@@ -156,7 +156,7 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   for (const auto& m : markers->markers) {
     in.model_from_marker[m.marker_id] = model_from_body * m.body_from_marker;
     if (m.motion_m > 0) in.sticker_motion_m[m.marker_id] = m.motion_m;
-    if (m.motion_m > 0 && !m.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) {
+    if (m.motion_m > 0 && m.HasMotionDirection()) {
       in.sticker_motion_direction[m.marker_id] = m.motion_direction;
     }
   }

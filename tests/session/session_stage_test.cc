@@ -496,7 +496,7 @@ TEST(SessionStage, BreathingStickersMoveTheWayTheScanSawThem) {
   for (const BodyMarker& m : map->markers) {
     if (!(m.motion_m > 0)) continue;
     ++moving;
-    if (m.motion_direction.isApprox(Eigen::Vector3d::UnitZ(), 1e-12)) continue;
+    if (!m.HasMotionDirection()) continue;
     ++directed;
     const Eigen::Vector3d normal = m.body_from_marker.rotation * Eigen::Vector3d::UnitZ();
     const Eigen::Vector3d direction = m.body_from_marker.rotation * m.motion_direction;
