@@ -162,7 +162,7 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   splitter->setStretchFactor(0, 2);
   splitter->setStretchFactor(1, 4);
   splitter->setStretchFactor(2, 4);
-  splitter->setSizes({320, 400, 380});
+  splitter->setSizes({270, 480, 350});
 
   auto* export_button = new QPushButton(tr("Export report…"), this);
   connect(export_button, &QPushButton::clicked, this, &AuditPage::ExportReport);
@@ -370,7 +370,10 @@ void AuditPage::ApplyFilters() {
     if (bad) bad_row = row;
   }
   table_->resizeColumnsToContents();
-  for (int c = 1; c < 4; ++c) table_->setColumnWidth(c, std::min(table_->columnWidth(c), 170));
+  // Who is often long ("root (research: no role given)"; the tooltip and
+  // the details have it whole): narrower, so that the action shows beside it.
+  table_->setColumnWidth(1, std::min(table_->columnWidth(1), 120));
+  for (int c = 2; c < 4; ++c) table_->setColumnWidth(c, std::min(table_->columnWidth(c), 170));
   if (bad_row >= 0) table_->scrollToItem(table_->item(bad_row, 0));
   count_label_->setText(tr("%1 of %2 entries").arg(table_->rowCount()).arg(entries_.size()));
 }
@@ -382,6 +385,7 @@ void AuditPage::ShowModels(long long plan_id, long long reconstruction_id, long 
   if (!plan) return;
   const TriangleMesh model = FromStoredMesh(plan->reference_model);
   model_view_->SetMesh("target", model, plan->room_from_model_target, 0.25, 0.45, 0.95, 0.35);
+  model_view_->SetViewSubject(plan->room_from_model_target);
   if (reconstruction_id == 0) return;
   const auto recon = db->GetReconstruction(ReconstructionId(reconstruction_id));
   if (!recon) return;

@@ -3,11 +3,12 @@
 /// later the reconstruction). The only VTK code of the GUI lives behind this
 /// class, so that no other file includes VTK headers.
 
-#include <QWidget>
 #include <QString>
+#include <QWidget>
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "geometry/rigid3.h"
@@ -36,7 +37,17 @@ class ModelView : public QWidget {
   void ClearMeshes();
   /// Shows room axes (x red, y green, z blue) of the given length at the origin.
   void ShowRoomAxes(double length_m);
+  /// Frames what is shown: the camera looks at the middle of the meshes'
+  /// points (0.2 to 99.8 percentile along each of its axes, so that a
+  /// few stray landmarks do not shrink the rest to a speck) from as close as
+  /// fits them all in the view. With a subject (SetViewSubject) it looks at
+  /// the patient from the patient's left and above, anterior up; without
+  /// one along its current direction. Until the user turns or zooms the
+  /// view, it is framed again whenever the view changes size.
   void ResetCamera();
+  /// The patient's pose in the room that ResetCamera views from (reference
+  /// model frame: x left, y posterior, z superior); nullopt: none.
+  void SetViewSubject(const std::optional<Rigid3d>& room_from_model);
   /// Renders and reads back the current image (for screenshots and tests).
   QImage Grab();
 
@@ -46,6 +57,11 @@ class ModelView : public QWidget {
   void Picked(QString slot, Eigen::Vector3d point_in_room, Eigen::Vector3d point_in_mesh_frame);
   /// Shift + left click that hit no mesh (`slot` empty) or hit `slot`.
   void PickMissed(QString slot);
+
+ protected:
+  /// A view framed by ResetCamera is framed again at its new size until the
+  /// user turns or zooms it.
+  void resizeEvent(QResizeEvent* event) override;
 
  private:
   void PickAt(int x, int y);

@@ -26,19 +26,20 @@
 #include "controllers/run_case_controller.h"
 #include "controllers/session_controller.h"
 #include "features/marker_pose.h"
+#include "geometry/so3.h"
 #include "registration/kdtree.h"
 #include "registration/mesh_cloud.h"
-#include "geometry/so3.h"
 #include "report/report_writer.h"
 #include "report/session_report.h"
-#include "sensor/case_check.h"
 #include "room_map/plan_stage.h"
+#include "sensor/case_check.h"
 #include "sensor/case_folder.h"
 #include "store/database.h"
 #include "store/describe.h"
 #include "store/lifecycle.h"
 #include "store/record_conversions.h"
 #include "store/sqlite_database.h"
+#include "tracking/tracking_stage.h"
 #include "ui/model_view.h"
 #include "ui/worker.h"
 #include "util/logging.h"
@@ -258,6 +259,11 @@ PlanningPage::PlanningPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   plan_label_->setWordWrap(true);
   approval_label_ = new QLabel(this);
   approval_label_->setWordWrap(true);
+  room_frame_label_ = new QLabel(this);
+  room_frame_label_->setObjectName("room_frame_warning");
+  room_frame_label_->setWordWrap(true);
+  room_frame_label_->setStyleSheet("color: #b03000;");
+  room_frame_label_->hide();
   import_button_ = new QPushButton(tr("Plan the case: build the room map"), this);
   import_button_->setObjectName("plan_button");
   approve_button_ = new QPushButton(tr("Approve this plan…"), this);
@@ -281,6 +287,7 @@ PlanningPage::PlanningPage(WizardState* state, QWidget* parent) : QWizardPage(pa
   auto* layout = new QVBoxLayout(this);
   layout->addWidget(model_view_, 1);
   layout->addWidget(plan_label_);
+  layout->addWidget(room_frame_label_);
   layout->addWidget(approval_label_);
   auto* row = new QHBoxLayout;
   row->addWidget(import_button_);
@@ -319,10 +326,12 @@ void PlanningPage::ApproveShownPlan() {
   bool ok = false;
   const QString note = QInputDialog::getText(
       this, tr("Approve plan %1").arg(shown_plan_),
-      tr("Approve plan %1 as %2?\nIts reference model, target pose and room map can no longer be changed; "
-         "therapists run sessions on it.\n\nNote (optional):")
+      tr("Approve plan %1 as %2?\nIts reference model, target pose and room map can no longer be "
+         "changed; "
+         "therapists run sessions on it.%3\n\nNote (optional):")
           .arg(shown_plan_)
-          .arg(Q(state_->op.Actor())),
+          .arg(Q(state_->op.Actor()))
+          .arg(room_frame_warning_.isEmpty() ? QString() : "\n\n" + room_frame_warning_),
       QLineEdit::Normal, QString(), &ok);
   if (!ok) return;
   try {
@@ -337,6 +346,9 @@ void PlanningPage::ShowLatestPlan() {
   shown_plan_ = 0;
   shown_plan_approvable_ = false;
   approval_label_->clear();
+  room_frame_warning_.clear();
+  room_frame_label_->clear();
+  room_frame_label_->hide();
   UpdateButtons();
   if (!state_->database) return;
   // The case's patient's newest plan, else the newest in the store.
@@ -378,6 +390,7 @@ void PlanningPage::ShowLatestPlan() {
   model_view_->SetMesh("target", FromStoredMesh(plan->reference_model), target, 0.25, 0.45, 0.95);
   ShowRoomMap(plan->id);
   model_view_->ShowRoomAxes(0.3);
+  model_view_->SetViewSubject(target);
   model_view_->ResetCamera();
 }
 
@@ -389,21 +402,17 @@ void PlanningPage::ShowRoomMap(PlanId plan) {
     return;
   }
   // Each mapped marker as its printed square (origin marker darker), each
-  // landmark as a 1 cm triangle facing up.
-  TriangleMesh markers, origin, landmarks;
+  // landmark as a small octahedron (seen from any side).
+  TriangleMesh markers, origin;
   for (const RoomMapMarker& m : map->markers) {
     AddQuad(m.marker_id == map->origin_marker_id ? &origin : &markers, m.corners_in_room);
   }
-  for (const auto& p : map->landmarks_in_room.points) {
-    const int base = static_cast<int>(landmarks.vertices.size());
-    landmarks.vertices.push_back(p + Eigen::Vector3f(-0.005f, -0.003f, 0));
-    landmarks.vertices.push_back(p + Eigen::Vector3f(0.005f, -0.003f, 0));
-    landmarks.vertices.push_back(p + Eigen::Vector3f(0, 0.006f, 0));
-    landmarks.faces.emplace_back(base, base + 1, base + 2);
-  }
+  std::vector<Eigen::Vector3d> landmarks;
+  landmarks.reserve(map->landmarks_in_room.points.size());
+  for (const auto& p : map->landmarks_in_room.points) landmarks.push_back(p.cast<double>());
   if (!markers.empty()) model_view_->SetMesh("room markers", markers, Rigid3d::Identity(), 0.95, 0.6, 0.1);
   if (!origin.empty()) model_view_->SetMesh("origin marker", origin, Rigid3d::Identity(), 0.75, 0.2, 0.05);
-  if (!landmarks.empty()) model_view_->SetMesh("landmarks", landmarks, Rigid3d::Identity(), 0.85, 0.85, 0.85);
+  model_view_->SetPoints("landmarks", landmarks, 0.85, 0.85, 0.85, 0.006);
   // Residuals, worst markers first: what a technician checks before use.
   std::vector<RoomMapMarker> sorted = map->markers;
   std::sort(sorted.begin(), sorted.end(),
@@ -435,6 +444,16 @@ void PlanningPage::ShowRoomMap(PlanId plan) {
             .arg(*map->room_frame_tilt_sigma_deg, 0, 'f', 3)
             .arg(*map->room_frame_yaw_sigma_deg, 0, 'f', 3));
   }
+  // What that means for tracking at the default tolerances, in the words
+  // the tracking run uses, before anyone approves the plan.
+  const RoomFrameNote note = DescribeRoomFrame(*map);
+  room_frame_warning_.clear();
+  if (note.blocks_in && !note.plan_advice.empty()) {
+    room_frame_warning_ = Q(note.plan_advice) + ".";
+    room_frame_warning_[0] = room_frame_warning_[0].toUpper();
+  }
+  room_frame_label_->setText(room_frame_warning_);
+  room_frame_label_->setVisible(note.blocks_in);
 }
 
 void PlanningPage::ImportCase() {
@@ -806,6 +825,8 @@ void SessionPage::ShowSession(int row) {
   if (shown_reconstruction_ != previous_reconstruction) ClearPicks();
   ShowPicks();
   details_->setText(lines.join("\n"));
+  model_view_->SetViewSubject(plan ? std::optional<Rigid3d>(plan->room_from_model_target)
+                                   : std::nullopt);
   model_view_->ResetCamera();
 }
 

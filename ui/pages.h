@@ -83,6 +83,10 @@ class PlanningPage : public QWizardPage {
   ModelView* model_view_;
   QLabel* plan_label_;
   QLabel* approval_label_;
+  /// The room frame's consequence for tracking when it alone keeps every
+  /// frame from reading `in` (DescribeRoomFrame); hidden otherwise.
+  QLabel* room_frame_label_;
+  QString room_frame_warning_;
   QPushButton* import_button_;
   QPushButton* approve_button_;
   QPushButton* cancel_button_;

@@ -9,12 +9,23 @@
 #include "store/lifecycle.h"
 #include "store/sqlite_database.h"
 #include "store/store_path.h"
+#include "tracking/tracking_stage.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
 namespace arpos {
 
 namespace {
+
+// What the room frame does to tracking at the default tolerances, said when
+// the room is mapped and when the plan is approved, not first when a
+// therapist tracks.
+void PrintRoomFrameAdvice(Database* database, RoomMapId map_id) {
+  const auto map = database->GetRoomMap(map_id);
+  if (!map) return;
+  const RoomFrameNote note = DescribeRoomFrame(*map);
+  if (note.blocks_in) std::cout << "warning: " << note.plan_advice << "\n";
+}
 
 int RunPlanApprove(const std::vector<std::string>& argv) {
   const char* usage =
@@ -33,6 +44,8 @@ int RunPlanApprove(const std::vector<std::string>& argv) {
   RecoverInterruptedSessions(database.get());
   const PlanRecord plan = ApprovePlan(database.get(), op, PlanId(id), args.GetOr("note", ""));
   std::cout << "plan " << plan.id.value() << " \"" << plan.name << "\" " << DescribeApproval(plan) << "\n";
+  if (const auto map_id = database->LatestRoomMap(plan.id))
+    PrintRoomFrameAdvice(database.get(), *map_id);
   return 0;
 }
 
@@ -134,6 +147,7 @@ int RunPlanCommand(const std::vector<std::string>& argv) {
     WriteTrajectory(args.Require("poses"), poses, "arpos plan: room frames, room_from_camera");
   }
   std::cout << "store: " << store_path << "\n" << result.Summary();
+  PrintRoomFrameAdvice(database.get(), result.room_map_id);
   return 0;
 }
 

@@ -49,6 +49,21 @@ std::optional<SessionPieces> PiecesOf(Database* database, SessionId session) {
 }
 }  // namespace
 
+namespace {
+// The room frame's sigmas of a stored map (none when it predates them).
+void SetRoomFrameSigmas(const RoomMapRecord& map, TrackingInputs* in) {
+  const auto usable = [](const std::optional<double>& v) {
+    return v && std::isfinite(*v) && *v >= 0;
+  };
+  if (usable(map.room_frame_couch_sigma_mm) && usable(map.room_frame_tilt_sigma_deg) &&
+      usable(map.room_frame_yaw_sigma_deg)) {
+    in->room_frame_position_sigma_mm = map.room_frame_couch_sigma_mm;
+    in->room_frame_rotation_sigma_deg =
+        std::hypot(*map.room_frame_tilt_sigma_deg, *map.room_frame_yaw_sigma_deg);
+  }
+}
+}  // namespace
+
 TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> session,
                                   const std::string& patient_external_id, bool newest_if_several) {
   ARPOS_CHECK(database != nullptr, "tracking needs a session store");
@@ -137,12 +152,7 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   if (!map) ARPOS_INPUT_ERROR("room map " << map_id->value() << " could not be read");
   in.room_map_id = *map_id;
   in.room_map = FromRecord(*map);
-  const auto usable = [](const std::optional<double>& v) { return v && std::isfinite(*v) && *v >= 0; };
-  if (usable(map->room_frame_couch_sigma_mm) && usable(map->room_frame_tilt_sigma_deg) &&
-      usable(map->room_frame_yaw_sigma_deg)) {
-    in.room_frame_position_sigma_mm = map->room_frame_couch_sigma_mm;
-    in.room_frame_rotation_sigma_deg = std::hypot(*map->room_frame_tilt_sigma_deg, *map->room_frame_yaw_sigma_deg);
-  }
+  SetRoomFrameSigmas(*map, &in);
   in.model = FromStoredMesh(plan->reference_model);
   if (in.model.empty()) ARPOS_INPUT_ERROR("plan " << plan->id.value() << ": the reference model has no faces");
   in.room_from_model_target = plan->room_from_model_target;
@@ -241,8 +251,22 @@ RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchToleran
         "tolerance, so no frame can read `in`; record the room again as the plan's warning says (close, sharp "
         "views of the origin marker, or more room markers between it and the couch)",
         k * sigma_mm, k * sigma_deg, k, tolerances.translation_mm, tolerances.rotation_deg);
+    note.plan_advice = StringPrintf(
+        "with this room map no tracked frame can read `in` at a tolerance of %.1f mm / %.1f deg: "
+        "the room frame "
+        "alone bounds every correction by %.1f mm / %.2f deg (%g sigma); record the room again "
+        "with close, sharp "
+        "views of the origin marker, or more room markers between it and the couch",
+        tolerances.translation_mm, tolerances.rotation_deg, k * sigma_mm, k * sigma_deg, k);
   }
   return note;
+}
+
+RoomFrameNote DescribeRoomFrame(const RoomMapRecord& map, const CouchTolerances& tolerances,
+                                double uncertainty_sigmas) {
+  TrackingInputs inputs;
+  SetRoomFrameSigmas(map, &inputs);
+  return DescribeRoomFrame(inputs, tolerances, uncertainty_sigmas);
 }
 
 OverlayPoses OverlayPosesOf(const TrackedFrame& tracked, const Rigid3d& room_from_model_target) {

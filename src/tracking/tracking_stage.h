@@ -89,8 +89,15 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
 struct RoomFrameNote {
   std::string text;
   bool blocks_in = false;
+  /// When it blocks `in`: the same for whoever plans or approves, as one
+  /// sentence (what no frame can read, why, what to record); else empty.
+  std::string plan_advice;
 };
 RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchTolerances& tolerances,
+                                double uncertainty_sigmas = TrackerOptions().uncertainty_sigmas);
+/// The same from a room map as stored (its room frame's sigmas: position at
+/// the couch, tilt and yaw together), for those who approve or show a plan.
+RoomFrameNote DescribeRoomFrame(const RoomMapRecord& map, const CouchTolerances& tolerances = {},
                                 double uncertainty_sigmas = TrackerOptions().uncertainty_sigmas);
 
 /// Where the overlay draws the model for a tracked frame: the current pose

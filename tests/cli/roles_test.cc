@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <string>
 
@@ -95,6 +96,23 @@ TEST_F(Roles, EachRoleDoesItsPartAndAnApprovedPlanStaysAsApproved) {
   r = As(kPhysicist, "plan approve 1 --note \"checked against the CT\"");
   ASSERT_EQ(r.status, 0) << r.output;
   EXPECT_TRUE(Contains(r.output, "approved by pia (physicist)")) << r.output;
+  // The physicist hears what the room frame does to tracking at the default
+  // tolerances (2 mm / 1 deg) when three of its sigmas exceed them.
+  {
+    const double mm = std::stod(
+        Value(store(), "SELECT room_frame_couch_sigma_mm FROM room_maps WHERE plan_id = 1"));
+    const double tilt = std::stod(
+        Value(store(), "SELECT room_frame_tilt_sigma_deg FROM room_maps WHERE plan_id = 1"));
+    const double yaw = std::stod(
+        Value(store(), "SELECT room_frame_yaw_sigma_deg FROM room_maps WHERE plan_id = 1"));
+    const bool blocks = 3 * mm >= 2.0 || 3 * std::hypot(tilt, yaw) >= 1.0;
+    EXPECT_EQ(
+        Contains(
+            r.output,
+            "warning: with this room map no tracked frame can read `in` at a tolerance of 2.0 mm"),
+        blocks)
+        << "room frame " << mm << " mm, " << tilt << " / " << yaw << " deg: " << r.output;
+  }
   r = As(kPhysicist, "plan approve 1");
   EXPECT_EQ(r.status, 2) << r.output;
   EXPECT_TRUE(Contains(r.output, "already approved")) << r.output;

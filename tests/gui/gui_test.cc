@@ -5,12 +5,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
-#include <optional>
-#include <vector>
 #include <opencv2/imgcodecs.hpp>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "sensor/test_case_builder.h"
 #include "store/sqlite_database.h"
@@ -166,16 +167,24 @@ TEST_F(GuiTest, SessionPageColoursTheSurfaceByItsDistanceToTheAlignedModel) {
   const cv::Mat shot = cv::imread(png.string(), cv::IMREAD_COLOR);
   KeepScreenshot(shot, "sample_session_page");
   ASSERT_FALSE(shot.empty());
-  int red = 0, green = 0;
+  int red = 0, green = 0, green_left = shot.cols, green_right = -1;
   for (int y = 0; y < shot.rows; ++y) {
     for (int x = 0; x < shot.cols; ++x) {
       const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
       if (p[2] > p[0] + 50 && p[2] > p[1] + 50) ++red;
-      if (p[1] > p[0] + 50 && p[1] > p[2] + 50) ++green;
+      if (p[1] > p[0] + 50 && p[1] > p[2] + 50) {
+        ++green;
+        green_left = std::min(green_left, x);
+        green_right = std::max(green_right, x);
+      }
     }
   }
   EXPECT_GT(green, 3000);
   EXPECT_LT(red, green / 5);
+  // The view is framed on the patient, not on everything at once: the
+  // surface spans over a third of the window (the whole body was a fifth).
+  EXPECT_GT(green_right - green_left, shot.cols / 3)
+      << "the surface spans x " << green_left << ".." << green_right;
 }
 
 // After run-case, the planning page shows the room map: the mapped room
@@ -204,6 +213,30 @@ TEST_F(GuiTest, PlanningPageShowsTheRoomMapMarkers) {
   }
   // Four or more markers of ~15 px squares seen from above.
   EXPECT_GT(orange, 200);
+  // Below the view, in red, what the room frame does to tracking when three
+  // of its sigmas exceed the default tolerances (2 mm / 1 deg); nothing red
+  // otherwise.
+  const auto database = SqliteDatabase::Open(store.string());
+  const auto map = database->GetRoomMap(*database->LatestRoomMap(PlanId(1)));
+  ASSERT_TRUE(map && map->room_frame_couch_sigma_mm && map->room_frame_tilt_sigma_deg &&
+              map->room_frame_yaw_sigma_deg);
+  const bool blocks =
+      3 * *map->room_frame_couch_sigma_mm >= 2.0 ||
+      3 * std::hypot(*map->room_frame_tilt_sigma_deg, *map->room_frame_yaw_sigma_deg) >= 1.0;
+  int red_text = 0;
+  for (int y = shot.rows * 2 / 3; y < shot.rows; ++y) {
+    for (int x = 0; x < shot.cols; ++x) {
+      const cv::Vec3b p = shot.at<cv::Vec3b>(y, x);  // BGR
+      if (p[2] > 120 && p[1] < 80 && p[0] < 50 && p[2] > p[1] + 70) ++red_text;
+    }
+  }
+  if (blocks) {
+    EXPECT_GT(red_text, 300) << "room frame " << *map->room_frame_couch_sigma_mm
+                             << " mm: no red warning";
+  } else {
+    EXPECT_LT(red_text, 20) << "room frame " << *map->room_frame_couch_sigma_mm
+                            << " mm: a red warning";
+  }
 }
 
 // ---------------------------------------------------------------- tracking page

@@ -740,6 +740,39 @@ TEST_F(TrackingStage, TheRoomFramesUncertaintyIsInEveryCorrectionsBound) {
   EXPECT_GE(measured, 3);
 }
 
+// The same judgement from a room map as stored, for those who plan and
+// approve: the room frame's sigmas (position at the couch, tilt and yaw
+// together) against the tolerance, with the advice only when it blocks `in`.
+TEST(RoomFrameOfAStoredMap, SaysWhenItAloneKeepsEveryFrameFromReadingIn) {
+  RoomMapRecord map;
+  EXPECT_FALSE(DescribeRoomFrame(map).blocks_in) << "a map from before the sigmas were stored";
+  EXPECT_EQ(DescribeRoomFrame(map).plan_advice, "");
+  map.room_frame_couch_sigma_mm = 0.5;
+  map.room_frame_tilt_sigma_deg = 0.03;
+  map.room_frame_yaw_sigma_deg = 0.04;
+  RoomFrameNote note = DescribeRoomFrame(map);  // 3 sigma: 1.5 mm, 0.15 deg
+  EXPECT_FALSE(note.blocks_in) << note.text;
+  EXPECT_EQ(note.plan_advice, "");
+  EXPECT_NE(note.text.find("known to 0.50 mm at the planned isocentre and 0.050 deg"),
+            std::string::npos)
+      << note.text;
+  map.room_frame_couch_sigma_mm = 1.94;  // 5.8 mm at 3 sigma
+  note = DescribeRoomFrame(map);
+  EXPECT_TRUE(note.blocks_in) << note.text;
+  EXPECT_NE(
+      note.plan_advice.find("no tracked frame can read `in` at a tolerance of 2.0 mm / 1.0 deg"),
+      std::string::npos)
+      << note.plan_advice;
+  EXPECT_NE(note.plan_advice.find("by 5.8 mm / 0.15 deg (3 sigma)"), std::string::npos)
+      << note.plan_advice;
+  // A wider tolerance admits it; rotation alone can block as well.
+  CouchTolerances wide;
+  wide.translation_mm = 6;
+  EXPECT_FALSE(DescribeRoomFrame(map, wide).blocks_in);
+  map.room_frame_tilt_sigma_deg = 0.4;  // hypot(0.4, 0.04) * 3 = 1.21 deg
+  EXPECT_TRUE(DescribeRoomFrame(map, wide).blocks_in);
+}
+
 TEST_F(TrackingStage, TrackCommandRefusesBadArgumentsAndStoresNothing) {
   const auto before = testing::RunArpos("store info --store " + store_.string());
   auto bad = testing::RunArpos("track " + (case_ / "tracking" / "seq_00").string() + " --store " + store_.string() +
