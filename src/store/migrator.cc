@@ -30,6 +30,24 @@ class ForeignKeysOff {
   bool was_on_;
 };
 
+// Rows whose references point nowhere before any migration (a store changed
+// outside arpos with foreign keys off) are not the migration's fault, and
+// are not migrated over: refused, before anything is written.
+void RefuseDanglingReferences(sqlite3* db, const std::string& path, int version) {
+  const std::int64_t dangling = QueryInt64(db, "SELECT COUNT(*) FROM pragma_foreign_key_check");
+  if (dangling == 0) return;
+  const std::string tables = QueryText(db,
+                                       "SELECT group_concat(t, ', ') FROM (SELECT DISTINCT "
+                                       "\"table\" AS t FROM pragma_foreign_key_check)");
+  ARPOS_INPUT_ERROR(
+      path
+      << ": the store holds " << dangling << " row(s) whose references point to rows that are "
+      << "not there (in " << tables
+      << "), as when rows are deleted outside arpos with foreign keys off; it was not migrated "
+         "from schema version "
+      << version << " and nothing was changed: use a backup of the store, or a new one");
+}
+
 }  // namespace
 
 int LatestSchemaVersion() { return static_cast<int>(SchemaMigrations().size()); }
@@ -52,6 +70,7 @@ void CheckStoreCompatible(sqlite3* db, const std::string& path) {
     ARPOS_INPUT_ERROR(path << ": not an ARPos store (SQLite application_id " << application_id
                            << ", user_version " << version << ")");
   }
+  if (version > 0 && version < latest) RefuseDanglingReferences(db, path, version);
   if (version == 0) {
     const std::int64_t num_objects = QueryInt64(db, "SELECT COUNT(*) FROM sqlite_master");
     if (num_objects > 0) {
@@ -75,6 +94,7 @@ int MigrateSchema(sqlite3* db, const std::string& path, int target_version) {
   if (initial == target_version) return 0;
 
   ForeignKeysOff foreign_keys_off(db);
+  RefuseDanglingReferences(db, path, initial);
   int applied = 0;
   while (true) {
     SqliteTransaction transaction(db);

@@ -504,6 +504,35 @@ TEST(Migrations, AFailingStepIsRolledBackWhole) {
   EXPECT_EQ(raw.Text("SELECT external_id FROM patients"), "MRN-old|\n");
 }
 
+// A store whose rows point to rows that are gone (deleted outside arpos
+// with foreign keys off) is refused before any step runs: the message names
+// the tables and says nothing changed; the migration is not blamed.
+TEST(Migrations, AStoreWithDanglingReferencesIsRefusedUntouched) {
+  TempDir dir;
+  const std::string path = (dir.path() / "dangling.db").string();
+  {
+    RawDb raw(path);
+    ASSERT_EQ(MigrateSchema(raw.get(), path, 1), 1);
+    WriteOldData(raw, MakeOldData(), 1);
+    raw.Exec("PRAGMA foreign_keys = OFF");
+    raw.Exec("DELETE FROM plans");
+  }
+  const std::string before = test::FileBytes(path);
+  try {
+    SqliteDatabase::Open(path);
+    ADD_FAILURE() << "no throw";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    for (const std::string& part :
+         {path, std::string("references point to rows that are not there"), std::string("sessions"),
+          std::string("not migrated from schema version 1"), std::string("nothing was changed")}) {
+      EXPECT_NE(what.find(part), std::string::npos) << "'" << part << "' not in: " << what;
+    }
+    EXPECT_EQ(what.find("migration 0002"), std::string::npos) << what;
+  }
+  EXPECT_EQ(test::FileBytes(path), before) << "the refused store was modified";
+}
+
 // Newer store: refused with both versions named, file bytes unchanged.
 void ExpectNewerStoreRefused(const std::string& path) {
   const int newer = LatestSchemaVersion() + 1;
