@@ -105,4 +105,24 @@ std::string DescribeCorrection(const CouchCorrection& c) {
                       c.state == CorrectionState::kIn ? "IN TOLERANCE" : "OUT OF TOLERANCE");
 }
 
+RoomFrameBound BoundOfRoomFrame(double position_sigma_mm, double rotation_sigma_deg,
+                                const CouchTolerances& tolerances, double sigmas) {
+  RoomFrameBound bound;
+  bound.translation_mm = sigmas * position_sigma_mm;
+  bound.rotation_deg = sigmas * rotation_sigma_deg;
+  bound.blocks_in = !(bound.translation_mm < tolerances.translation_mm &&
+                      bound.rotation_deg < tolerances.rotation_deg);
+  if (bound.blocks_in) {
+    bound.advice = StringPrintf(
+        "with this room map no tracked frame can read `in` at a tolerance of %.1f mm / %.1f deg: "
+        "the room frame "
+        "alone bounds every correction by %.1f mm / %.2f deg (%g sigma); record the room again "
+        "with close, sharp "
+        "views of the origin marker, or more room markers between it and the couch",
+        tolerances.translation_mm, tolerances.rotation_deg, bound.translation_mm,
+        bound.rotation_deg, sigmas);
+  }
+  return bound;
+}
+
 }  // namespace arpos

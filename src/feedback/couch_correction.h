@@ -51,6 +51,25 @@ struct CouchCorrection {
   CorrectionState state = CorrectionState::kLost;
 };
 
+/// How many sigmas of a pose's uncertainty a correction's bound spans by
+/// default (TrackerOptions::uncertainty_sigmas).
+constexpr double kDefaultUncertaintySigmas = 3.0;
+
+/// What a room frame known to `position_sigma_mm` at the isocentre and
+/// `rotation_sigma_deg` (1 sigma, from the plan) alone adds to every
+/// correction's bound, `sigmas` of each: whether that alone keeps every frame
+/// from reading `in` at `tolerances` (the bound reaches either tolerance),
+/// and then one sentence for whoever plans, approves or audits the plan
+/// (what cannot read `in`, why, what to record); empty otherwise.
+struct RoomFrameBound {
+  double translation_mm = 0, rotation_deg = 0;  ///< the bound it adds
+  bool blocks_in = false;
+  std::string advice;
+};
+RoomFrameBound BoundOfRoomFrame(double position_sigma_mm, double rotation_sigma_deg,
+                                const CouchTolerances& tolerances,
+                                double sigmas = kDefaultUncertaintySigmas);
+
 /// The correction from `room_from_model_current` to `room_from_model_target`.
 CouchCorrection ComputeCouchCorrection(const Rigid3d& room_from_model_current,
                                        const Rigid3d& room_from_model_target,

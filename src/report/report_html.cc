@@ -1,9 +1,11 @@
 #include "report/report_html.h"
 
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
 
+#include "feedback/couch_correction.h"
 #include "geometry/rigid3.h"
 #include "store/describe.h"
 
@@ -180,6 +182,7 @@ void RunSection(Html& h, const ReportRun& r, std::size_t index, const std::vecto
        r.latency_mean_ms ? "mean " + Fixed(*r.latency_mean_ms, 1) + " ms, p95 " + Fixed(*r.latency_p95_ms, 1) +
                                " ms over " + std::to_string(r.latency_frames) + " frames"
                          : std::string("not recorded"));
+  if (!r.run.summary.empty()) h.Kv("Run record", Lines(r.run.summary));
   h.EndTable();
   h << "<p class=\"note\">Corrections in the couch axes (IEC 61217): translation lateral, longitudinal, "
        "vertical; rotation pitch, roll, yaw (components of the rotation vector). The last row is the "
@@ -283,6 +286,33 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
       if (!r.approval->note.empty()) text += "; note: " + r.approval->note;
     }
     h.Kv("Approval", E(text));
+  }
+  if (r.room_map) {
+    const ReportRoomMap& m = *r.room_map;
+    h.Kv("Room map", "map " + std::to_string(m.id.value()) + ": " + std::to_string(m.num_markers) +
+                         " markers (origin " + std::to_string(m.origin_marker_id) + "), " +
+                         std::to_string(m.num_landmarks) +
+                         " keypoint landmarks; marker corner residual mean " +
+                         Fixed(m.mean_residual_px, 3) + " px, max " + Fixed(m.max_residual_px, 3) +
+                         " px; built " + E(Time(m.created_unix_ms)));
+    if (m.room_frame) {
+      h.Kv("Room frame at the couch (1 sigma)",
+           Fixed(m.room_frame->position_mm, 2) + " mm, " + Fixed(m.room_frame->rotation_deg, 3) +
+               " deg (tilt and yaw together); part of every correction's bound");
+      // What it does at the default tolerances, as the planning page and
+      // `arpos plan approve` say it (each run below names its own).
+      const RoomFrameBound bound = BoundOfRoomFrame(m.room_frame->position_mm,
+                                                    m.room_frame->rotation_deg, CouchTolerances());
+      if (bound.blocks_in) {
+        std::string advice = bound.advice;
+        advice[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(advice[0])));
+        h.Kv("Room frame and tolerance", "<b>" + E(advice) + ".</b>");
+      }
+    } else {
+      h.Kv("Room frame at the couch (1 sigma)", "not measured (a room map from before it was)");
+    }
+  } else {
+    h.Kv("Room map", "none");
   }
   h.EndTable();
 

@@ -188,6 +188,20 @@ SessionReport GatherSessionReport(Database* database, SessionId session_id, cons
     report.reference_model_faces = static_cast<std::int64_t>(plan->reference_model.faces.size());
     plan->reference_model = StoredTriangleMesh();
     report.approval = ApprovalOf(*plan);
+    if (const auto map_id = database->LatestRoomMap(plan->id)) {
+      if (const std::optional<RoomMapRecord> map = database->GetRoomMap(*map_id)) {
+        ReportRoomMap summary;
+        summary.id = map->id;
+        summary.origin_marker_id = map->origin_marker_id;
+        summary.num_markers = static_cast<int>(map->markers.size());
+        summary.num_landmarks = static_cast<std::int64_t>(map->landmarks_in_room.points.size());
+        summary.mean_residual_px = map->mean_residual_px;
+        summary.max_residual_px = map->max_residual_px;
+        summary.created_unix_ms = map->created_unix_ms;
+        summary.room_frame = RoomFrameSigmasOf(*map);
+        report.room_map = summary;
+      }
+    }
     report.plan = std::move(*plan);
     if (std::optional<PatientRecord> patient = database->GetPatient(report.plan.patient_id)) {
       report.patient = std::move(*patient);

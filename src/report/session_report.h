@@ -81,6 +81,19 @@ struct ReportRun {
   static double Percent(int part, int whole) { return whole > 0 ? 100.0 * part / whole : 0.0; }
 };
 
+/// The plan's newest room map, as much as the report says of it (no blobs).
+struct ReportRoomMap {
+  RoomMapId id;
+  int origin_marker_id = 0;
+  int num_markers = 0;
+  std::int64_t num_landmarks = 0;
+  double mean_residual_px = 0, max_residual_px = 0;
+  std::int64_t created_unix_ms = 0;
+  /// How well the room frame is known at the couch (1 sigma); nullopt: a
+  /// map from before it was measured.
+  std::optional<RoomFrameSigmas> room_frame;
+};
+
 struct SessionReport {
   std::string title = "ARPos patient positioning session report";
   std::int64_t generated_unix_ms = 0;
@@ -91,6 +104,7 @@ struct SessionReport {
   PlanRecord plan;        ///< reference_model left empty (only its size below)
   std::int64_t reference_model_vertices = 0, reference_model_faces = 0;
   std::optional<PlanApprovalInfo> approval;  ///< set whenever the plan was read
+  std::optional<ReportRoomMap> room_map;     ///< the plan's newest room map, if any
   SessionRecord session;
 
   std::vector<BodyMarkerMapRecord> body_marker_maps;

@@ -1,5 +1,6 @@
 #include "store/records.h"
 
+#include <cmath>
 #include <sstream>
 #include <utility>
 
@@ -65,6 +66,18 @@ AlignmentMethod ParseAlignmentMethod(const std::string& text) {
 }
 TrackingFrameStatus ParseTrackingFrameStatus(const std::string& text) {
   return ParseEnum(text, kTrackingFrameStatusNames, "tracking frame status");
+}
+
+std::optional<RoomFrameSigmas> RoomFrameSigmasOf(const RoomMapRecord& map) {
+  const auto usable = [](const std::optional<double>& v) {
+    return v && std::isfinite(*v) && *v >= 0;
+  };
+  if (!usable(map.room_frame_couch_sigma_mm) || !usable(map.room_frame_tilt_sigma_deg) ||
+      !usable(map.room_frame_yaw_sigma_deg)) {
+    return std::nullopt;
+  }
+  return RoomFrameSigmas{*map.room_frame_couch_sigma_mm,
+                         std::hypot(*map.room_frame_tilt_sigma_deg, *map.room_frame_yaw_sigma_deg)};
 }
 
 }  // namespace arpos

@@ -165,6 +165,16 @@ struct RoomMapRecord {
   std::int64_t created_unix_ms = 0;
 };
 
+/// The room frame's uncertainty at the planned isocentre as tracking takes
+/// it (1 sigma): the position, and one angle for tilt and yaw together
+/// (their root sum of squares); nullopt when the map does not hold all three
+/// or any is not a finite non-negative number.
+struct RoomFrameSigmas {
+  double position_mm = 0;
+  double rotation_deg = 0;
+};
+std::optional<RoomFrameSigmas> RoomFrameSigmasOf(const RoomMapRecord& map);
+
 // ---------------------------------------------------------------- session
 
 enum class SessionStatus { kOpen, kCompleted, kAborted };

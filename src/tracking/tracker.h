@@ -47,7 +47,7 @@ struct TrackerOptions {
   CouchTolerances tolerances;
   /// The correction's uncertainty bound is this many sigmas of the pose's
   /// own uncertainty, at least the floors below.
-  double uncertainty_sigmas = 3.0;
+  double uncertainty_sigmas = kDefaultUncertaintySigmas;
   double uncertainty_floor_mm = 0.3;
   double uncertainty_floor_deg = 0.05;
   /// A frame whose own pose is less certain than this at the isocentre (1

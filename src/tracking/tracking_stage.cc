@@ -52,14 +52,9 @@ std::optional<SessionPieces> PiecesOf(Database* database, SessionId session) {
 namespace {
 // The room frame's sigmas of a stored map (none when it predates them).
 void SetRoomFrameSigmas(const RoomMapRecord& map, TrackingInputs* in) {
-  const auto usable = [](const std::optional<double>& v) {
-    return v && std::isfinite(*v) && *v >= 0;
-  };
-  if (usable(map.room_frame_couch_sigma_mm) && usable(map.room_frame_tilt_sigma_deg) &&
-      usable(map.room_frame_yaw_sigma_deg)) {
-    in->room_frame_position_sigma_mm = map.room_frame_couch_sigma_mm;
-    in->room_frame_rotation_sigma_deg =
-        std::hypot(*map.room_frame_tilt_sigma_deg, *map.room_frame_yaw_sigma_deg);
+  if (const auto sigmas = RoomFrameSigmasOf(map)) {
+    in->room_frame_position_sigma_mm = sigmas->position_mm;
+    in->room_frame_rotation_sigma_deg = sigmas->rotation_deg;
   }
 }
 }  // namespace
@@ -244,20 +239,18 @@ RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchToleran
       "room frame: known to %.2f mm at the planned isocentre and %.3f deg (1 sigma, from the plan); part of "
       "every correction's bound",
       sigma_mm, sigma_deg);
-  note.blocks_in = !(k * sigma_mm < tolerances.translation_mm && k * sigma_deg < tolerances.rotation_deg);
+  const RoomFrameBound bound = BoundOfRoomFrame(sigma_mm, sigma_deg, tolerances, k);
+  note.blocks_in = bound.blocks_in;
+  note.plan_advice = bound.advice;
   if (note.blocks_in) {
     note.text += StringPrintf(
-        ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f mm / %.1f deg "
-        "tolerance, so no frame can read `in`; record the room again as the plan's warning says (close, sharp "
+        ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f "
+        "mm / %.1f deg "
+        "tolerance, so no frame can read `in`; record the room again as the plan's warning says "
+        "(close, sharp "
         "views of the origin marker, or more room markers between it and the couch)",
-        k * sigma_mm, k * sigma_deg, k, tolerances.translation_mm, tolerances.rotation_deg);
-    note.plan_advice = StringPrintf(
-        "with this room map no tracked frame can read `in` at a tolerance of %.1f mm / %.1f deg: "
-        "the room frame "
-        "alone bounds every correction by %.1f mm / %.2f deg (%g sigma); record the room again "
-        "with close, sharp "
-        "views of the origin marker, or more room markers between it and the couch",
-        tolerances.translation_mm, tolerances.rotation_deg, k * sigma_mm, k * sigma_deg, k);
+        bound.translation_mm, bound.rotation_deg, k, tolerances.translation_mm,
+        tolerances.rotation_deg);
   }
   return note;
 }

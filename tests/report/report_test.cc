@@ -143,6 +143,49 @@ TEST(SessionReport, TheScansRoomLandmarksAreDescribed) {
   EXPECT_NE(html.find("Room landmarks the scan placed (map "), std::string::npos);
 }
 
+// The plan's room map and how well it places the room frame at the couch;
+// when that alone keeps every frame from reading `in` at the default
+// tolerances, the report says so as the planning page does; each run's own
+// record (its summary) is in its table.
+TEST(SessionReport, ThePlansRoomFrameAndEachRunsRecordAreReported) {
+  for (const double sigma_mm : {0.4, 1.9}) {
+    Fixture f;
+    test::ReportStoreOptions options;
+    options.room_frame_couch_sigma_mm = sigma_mm;
+    const test::ReportStoreIds ids = test::WriteReportStore(*f.db, options);
+    const SessionReport r = GatherSessionReport(f.db.get(), ids.session, f.path);
+    ASSERT_TRUE(r.room_map.has_value());
+    EXPECT_EQ(r.room_map->num_markers, 2);
+    EXPECT_EQ(r.room_map->origin_marker_id, 7);
+    ASSERT_TRUE(r.room_map->room_frame.has_value());
+    EXPECT_DOUBLE_EQ(r.room_map->room_frame->position_mm, sigma_mm);
+    EXPECT_NEAR(r.room_map->room_frame->rotation_deg, 0.05, 1e-12);
+    EXPECT_TRUE(r.verification.ok()) << r.verification.ToText();
+    const std::string html = RenderReportHtml(r, {}, ReportImageMode::kDataUri);
+    EXPECT_NE(html.find("2 markers (origin 7)"), std::string::npos);
+    EXPECT_NE(html.find(sigma_mm < 1 ? "0.40 mm, 0.050 deg (tilt and yaw together)"
+                                     : "1.90 mm, 0.050 deg (tilt and yaw together)"),
+              std::string::npos);
+    const bool blocks = sigma_mm * 3 >= 2.0;
+    EXPECT_EQ(
+        html.find(
+            "With this room map no tracked frame can read `in` at a tolerance of 2.0 mm / 1.0 deg: "
+            "the room frame alone bounds every correction by 5.7 mm / 0.15 deg") !=
+            std::string::npos,
+        blocks)
+        << sigma_mm;
+    EXPECT_NE(html.find("<th>Run record</th><td>test run</td>"), std::string::npos);
+  }
+  // A plan without a room map says so.
+  Fixture f;
+  const test::ReportStoreIds ids = test::WriteReportStore(*f.db);
+  const SessionReport r = GatherSessionReport(f.db.get(), ids.session, f.path);
+  EXPECT_FALSE(r.room_map.has_value());
+  EXPECT_NE(
+      RenderReportHtml(r, {}, ReportImageMode::kDataUri).find("<th>Room map</th><td>none</td>"),
+      std::string::npos);
+}
+
 TEST(ReportHtml, EveryStoredTextIsEscaped) {
   Fixture f;
   test::ReportStoreOptions options;

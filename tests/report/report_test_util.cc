@@ -69,6 +69,28 @@ ReportStoreIds WriteReportStore(Database& db, const ReportStoreOptions& options)
       Rigid3d::FromRotationVector(Eigen::Vector3d(0, 0, M_PI / 2), Eigen::Vector3d(0.1, -0.2, 0.9));
   ids.plan = db.AddPlan(plan);
   Audit(db, "add_plan", Entity("plan", ids.plan));
+  if (options.room_frame_couch_sigma_mm >= 0) {
+    RoomMapRecord map;
+    map.plan_id = ids.plan;
+    map.origin_marker_id = 7;
+    map.marker_size_m = 0.15;
+    for (int id : {7, 9}) {
+      RoomMapMarker marker;
+      marker.marker_id = id;
+      for (int c = 0; c < 4; ++c)
+        marker.corners_in_room[c] = Eigen::Vector3d(id + 0.15 * (c % 2), 0.15 * (c / 2), 0);
+      marker.residual_px = 0.05;
+      marker.num_observations = 12;
+      map.markers.push_back(marker);
+    }
+    map.mean_residual_px = 0.05;
+    map.max_residual_px = 0.06;
+    map.room_frame_tilt_sigma_deg = 0.03;
+    map.room_frame_yaw_sigma_deg = 0.04;
+    map.room_frame_couch_sigma_mm = options.room_frame_couch_sigma_mm;
+    map.created_unix_ms = 1700000003000;
+    Audit(db, "add_room_map", Entity("room_map", db.AddRoomMap(map)));
+  }
 
   for (int s = 0; s < 2; ++s) {
     SessionRecord session;

@@ -16,6 +16,10 @@ struct ReportStoreOptions {
   std::string patient_name = "Test Patient";
   std::string plan_name = "Pelvis plan A";
   int num_runs = 2;  ///< 0: a session without tracking
+  /// >= 0: the plan gets a room map (id 7 origin, two markers) whose room
+  /// frame is known to this at the couch, tilt 0.03 and yaw 0.04 deg (so
+  /// 0.05 deg together); < 0: no room map.
+  double room_frame_couch_sigma_mm = -1;
 };
 
 struct ReportStoreIds {
