@@ -27,6 +27,7 @@
 #include "store/describe.h"
 #include "store/record_conversions.h"
 #include "store/sqlite_database.h"
+#include "tracking/tracking_stage.h"
 #include "ui/correction_plot.h"
 #include "ui/model_view.h"
 #include "ui/pages.h"
@@ -519,6 +520,32 @@ void AuditPage::ShowDetail(QTreeWidgetItem* item) {
                                          .arg(Q(FormatUtcTime(*plan->approved_unix_ms)))
                                          .arg(plan->approval_note.empty() ? tr("(none)") : Q(plan->approval_note))
                                    : tr("Not approved."));
+        // Its newest room map and what the room frame does to tracking at the
+        // default tolerances, as the planning page and the report say it.
+        if (const auto map_id = state_->database->LatestRoomMap(plan->id)) {
+          if (const auto map = state_->database->GetRoomMap(*map_id)) {
+            lines << tr("Room map %1: %2 markers (origin %3), marker corner residual mean %4 px, "
+                        "max %5 px.")
+                         .arg(map_id->value())
+                         .arg(map->markers.size())
+                         .arg(map->origin_marker_id)
+                         .arg(map->mean_residual_px, 0, 'f', 3)
+                         .arg(map->max_residual_px, 0, 'f', 3);
+            const RoomFrameNote note = DescribeRoomFrame(*map);
+            if (const auto sigmas = RoomFrameSigmasOf(*map)) {
+              lines << tr("Room frame at the couch: %1 mm, %2 deg (1 sigma).")
+                           .arg(sigmas->position_mm, 0, 'f', 2)
+                           .arg(sigmas->rotation_deg, 0, 'f', 3);
+            }
+            if (note.blocks_in) {
+              QString advice = Q(note.plan_advice) + ".";
+              advice[0] = advice[0].toUpper();
+              lines << advice;
+            }
+          }
+        } else {
+          lines << tr("No room map yet.");
+        }
         lines << tr("The model at its planned pose in blue.");
         three_d = true;
         ShowModels(id, 0, 0, &lines);
