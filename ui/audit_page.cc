@@ -145,8 +145,8 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   auto* detail_layout = new QVBoxLayout(detail_panel);
   detail_layout->setContentsMargins(0, 0, 0, 0);
   detail_layout->addWidget(detail_title_);
-  detail_layout->addWidget(model_view_, 3);
-  detail_layout->addWidget(run_plot_, 3);
+  detail_layout->addWidget(model_view_, 1);
+  detail_layout->addWidget(run_plot_, 1);
   // The text scrolls: a run's summary and notes can outgrow the panel, and a
   // label sized to all of its text squeezed the plot and ran off the bottom.
   auto* detail_scroll = new QScrollArea(detail_panel);
@@ -154,7 +154,7 @@ AuditPage::AuditPage(WizardState* state, QWidget* parent) : QWizardPage(parent),
   detail_scroll->setWidgetResizable(true);
   detail_scroll->setFrameShape(QFrame::NoFrame);
   detail_scroll->setWidget(detail_text_);
-  detail_layout->addWidget(detail_scroll, 2);
+  detail_layout->addWidget(detail_scroll, 1);
 
   auto* splitter = new QSplitter(Qt::Horizontal, this);
   splitter->addWidget(tree_);
