@@ -327,8 +327,7 @@ void PlanningPage::ApproveShownPlan() {
   const QString note = QInputDialog::getText(
       this, tr("Approve plan %1").arg(shown_plan_),
       tr("Approve plan %1 as %2?\nIts reference model, target pose and room map can no longer be "
-         "changed; "
-         "therapists run sessions on it.%3\n\nNote (optional):")
+         "changed; therapists run sessions on it.%3\n\nNote (optional):")
           .arg(shown_plan_)
           .arg(Q(state_->op.Actor()))
           .arg(room_frame_warning_.isEmpty() ? QString() : "\n\n" + room_frame_warning_),

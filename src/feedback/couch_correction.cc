@@ -115,10 +115,9 @@ RoomFrameBound BoundOfRoomFrame(double position_sigma_mm, double rotation_sigma_
   if (bound.blocks_in) {
     bound.advice = StringPrintf(
         "with this room map no tracked frame can read `in` at a tolerance of %.1f mm / %.1f deg: "
-        "the room frame "
-        "alone bounds every correction by %.1f mm / %.2f deg (%g sigma); record the room again "
-        "with close, sharp "
-        "views of the origin marker, or more room markers between it and the couch",
+        "the room frame alone bounds every correction by %.1f mm / %.2f deg (%g sigma); record "
+        "the room again with close, sharp views of the origin marker, or more room markers "
+        "between it and the couch",
         tolerances.translation_mm, tolerances.rotation_deg, bound.translation_mm,
         bound.rotation_deg, sigmas);
   }

@@ -47,9 +47,7 @@ std::optional<SessionPieces> PiecesOf(Database* database, SessionId session) {
   }
   return std::nullopt;
 }
-}  // namespace
 
-namespace {
 // The room frame's sigmas of a stored map (none when it predates them).
 void SetRoomFrameSigmas(const RoomMapRecord& map, TrackingInputs* in) {
   if (const auto sigmas = RoomFrameSigmasOf(map)) {
@@ -244,11 +242,10 @@ RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchToleran
   note.plan_advice = bound.advice;
   if (note.blocks_in) {
     note.text += StringPrintf(
-        ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the %.1f "
-        "mm / %.1f deg "
-        "tolerance, so no frame can read `in`; record the room again as the plan's warning says "
-        "(close, sharp "
-        "views of the origin marker, or more room markers between it and the couch)",
+        ": alone it bounds every correction by %.1f mm / %.2f deg (%g sigma), not within the "
+        "%.1f mm / %.1f deg tolerance, so no frame can read `in`; record the room again as the "
+        "plan's warning says (close, sharp views of the origin marker, or more room markers "
+        "between it and the couch)",
         bound.translation_mm, bound.rotation_deg, k, tolerances.translation_mm,
         tolerances.rotation_deg);
   }
