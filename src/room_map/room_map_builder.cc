@@ -196,13 +196,8 @@ SupportPlaneFit FitSupportPlane(const std::vector<SupportView>& views, double ha
   return fit;
 }
 
-// Of a marker's two IPPE solutions (camera_from_marker), the one whose plane
-// the depth around the marker (the floor or wall it lies on) agrees with:
-// Cauchy-weighted depth residuals over the sensor's noise; nullopt unless
-// one explains the depth clearly better (cost ratio >= 2) and at least 50
-// samples lie on its plane. One small, oblique view cannot tell its two
-// solutions apart by reprojection, and the few depth pixels inside a 20 px
-// marker cannot either; the plane around it can.
+}  // namespace
+
 std::optional<int> SolutionBySupportDepth(const MarkerPose& pose, const std::vector<DepthSample>& samples,
                                           const CameraIntrinsics& K, const BaOptions& ba_options) {
   if (pose.num_solutions != 2 || samples.size() < 50) return std::nullopt;
@@ -211,7 +206,15 @@ std::optional<int> SolutionBySupportDepth(const MarkerPose& pose, const std::vec
   for (int k = 0; k < 2; ++k) {
     const Rigid3d& m = pose.solutions[k].camera_from_marker;
     const Eigen::Vector3d n = m.rotation * Eigen::Vector3d::UnitZ();
-    const double d = n.dot(m.translation);
+    std::vector<double> offsets;
+    offsets.reserve(samples.size());
+    for (const DepthSample& sample : samples) {
+      const Eigen::Vector3d ray((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy,
+                                1);
+      offsets.push_back(n.dot(sample.depth_m * ray));
+    }
+    std::nth_element(offsets.begin(), offsets.begin() + offsets.size() / 2, offsets.end());
+    const double d = offsets[offsets.size() / 2];
     for (const DepthSample& sample : samples) {
       const Eigen::Vector3d ray((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy, 1);
       const double denom = n.dot(ray);
@@ -227,6 +230,8 @@ std::optional<int> SolutionBySupportDepth(const MarkerPose& pose, const std::vec
   if (on_plane[better] < 50 || !(cost[1 - better] >= 2 * cost[better])) return std::nullopt;
   return better;
 }
+
+namespace {
 
 // The candidates the thinning left out, triangulated against the adjusted
 // cameras (held fixed) and appended to the map for localisation only: each
