@@ -33,6 +33,7 @@
 #include "ui/pages.h"
 #include "util/check.h"
 #include "util/logging.h"
+#include "util/string_util.h"
 
 namespace arpos::ui {
 namespace {
@@ -537,11 +538,7 @@ void AuditPage::ShowDetail(QTreeWidgetItem* item) {
                            .arg(sigmas->position_mm, 0, 'f', 2)
                            .arg(sigmas->rotation_deg, 0, 'f', 3);
             }
-            if (note.blocks_in) {
-              QString advice = Q(note.plan_advice) + ".";
-              advice[0] = advice[0].toUpper();
-              lines << advice;
-            }
+            if (note.blocks_in) lines << Q(AsSentence(note.plan_advice));
           }
         } else {
           lines << tr("No room map yet.");

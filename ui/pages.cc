@@ -446,11 +446,7 @@ void PlanningPage::ShowRoomMap(PlanId plan) {
   // What that means for tracking at the default tolerances, in the words
   // the tracking run uses, before anyone approves the plan.
   const RoomFrameNote note = DescribeRoomFrame(*map);
-  room_frame_warning_.clear();
-  if (note.blocks_in && !note.plan_advice.empty()) {
-    room_frame_warning_ = Q(note.plan_advice) + ".";
-    room_frame_warning_[0] = room_frame_warning_[0].toUpper();
-  }
+  room_frame_warning_ = note.blocks_in ? Q(AsSentence(note.plan_advice)) : QString();
   room_frame_label_->setText(room_frame_warning_);
   room_frame_label_->setVisible(note.blocks_in);
 }

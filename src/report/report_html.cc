@@ -1,6 +1,5 @@
 #include "report/report_html.h"
 
-#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <sstream>
@@ -8,6 +7,7 @@
 #include "feedback/couch_correction.h"
 #include "geometry/rigid3.h"
 #include "store/describe.h"
+#include "util/string_util.h"
 
 namespace arpos {
 namespace {
@@ -303,11 +303,8 @@ std::string RenderReportHtml(const SessionReport& r, const std::vector<ReportIma
       // `arpos plan approve` say it (each run below names its own).
       const RoomFrameBound bound = BoundOfRoomFrame(m.room_frame->position_mm,
                                                     m.room_frame->rotation_deg, CouchTolerances());
-      if (bound.blocks_in) {
-        std::string advice = bound.advice;
-        advice[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(advice[0])));
-        h.Kv("Room frame and tolerance", "<b>" + E(advice) + ".</b>");
-      }
+      if (bound.blocks_in)
+        h.Kv("Room frame and tolerance", "<b>" + E(AsSentence(bound.advice)) + "</b>");
     } else {
       h.Kv("Room frame at the couch (1 sigma)", "not measured (a room map from before it was)");
     }

@@ -42,6 +42,13 @@ std::string ToLower(std::string_view text) {
   return out;
 }
 
+std::string AsSentence(std::string_view clause) {
+  std::string out(clause);
+  if (out.empty()) return out;
+  out[0] = static_cast<char>(std::toupper(static_cast<unsigned char>(out[0])));
+  return out + ".";
+}
+
 bool ParseDouble(std::string_view token, double* value) {
   std::string s(token);
   if (s.empty()) return false;

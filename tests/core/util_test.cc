@@ -37,6 +37,12 @@ TEST(StringUtil, ParsesStrictly) {
   EXPECT_EQ(Trim("  x y \n"), "x y");
 }
 
+TEST(StringUtil, AClauseBecomesASentence) {
+  EXPECT_EQ(AsSentence("with this room map no frame can read `in`"),
+            "With this room map no frame can read `in`.");
+  EXPECT_EQ(AsSentence(""), "");
+}
+
 TEST(File, AtomicWriteReplacesWholeFile) {
   TempDir dir;
   const auto path = dir.path() / "f.txt";
