@@ -53,8 +53,7 @@ bool ViewDisplacement(const BodyScanView& view, const BodyMarkerView& seen,
           camera_from_room * (room_from_marker * corners_in_marker[c] + delta);
       if (!(p.z() > 1e-3)) return false;
       const double iz = 1.0 / p.z();
-      const Eigen::Vector2d e(k.fx * p.x() * iz + k.cx - observed[c].x(),
-                              k.fy * p.y() * iz + k.cy - observed[c].y());
+      const Eigen::Vector2d e = k.Project(p) - observed[c];
       Eigen::Matrix<double, 2, 3> dproj;
       dproj << k.fx * iz, 0, -k.fx * p.x() * iz * iz, 0, k.fy * iz, -k.fy * p.y() * iz * iz;
       const Eigen::Matrix<double, 2, 3> J = inv_sigma[c] * dproj * r_cr;
@@ -78,8 +77,7 @@ bool ViewDisplacement(const BodyScanView& view, const BodyMarkerView& seen,
   for (int c = 0; c < 4; ++c) {
     const Eigen::Vector3d p = camera_from_room * (room_from_marker * corners_in_marker[c] + delta);
     if (!(p.z() > 1e-3)) return false;
-    sq += (Eigen::Vector2d(k.fx * p.x() / p.z() + k.cx, k.fy * p.y() / p.z() + k.cy) - observed[c])
-              .squaredNorm();
+    sq += (k.Project(p) - observed[c]).squaredNorm();
   }
   if (!(std::sqrt(sq / 4) <= o.max_view_rms_px) || !(delta.norm() < 0.05)) return false;
   const Eigen::Matrix3d cov =
