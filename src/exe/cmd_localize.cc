@@ -34,7 +34,8 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
       "                   SEQ_DIR holding a case.yaml)\n"
       "  --no-keypoints   markers only\n"
       "  --no-markers     keypoints only\n"
-      "  --timings FILE   per-frame status and step times (CPU ms) as CSV\n";
+      "  --timings FILE   per-frame status, step times (CPU ms) and why a lost frame is lost, as "
+      "CSV\n";
   const Args args(argv, {"store", "plan", "out", "case", "timings"}, {"no-keypoints", "no-markers", "help"});
   if (args.Has("help")) {
     std::cout << usage;
@@ -99,8 +100,8 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
 
   std::vector<StampedPose> poses;
   std::ostringstream csv;
-  csv << "timestamp,status,markers,keypoints,rms_px,position_sigma_mm,detection_ms,keypoints_ms,matching_ms,pnp_ms,"
-         "refinement_ms,total_ms\n";
+  csv << "timestamp,status,markers,keypoints,rms_px,position_sigma_mm,detection_ms,keypoints_ms,"
+         "matching_ms,pnp_ms,refinement_ms,total_ms,why_lost\n";
   int tracked = 0, relocalized = 0, lost = 0;
   double total_ms = 0;
   for (size_t i = 0; i < sequence.size(); ++i) {
@@ -113,10 +114,15 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
     lost += r.status == LocalizationStatus::kLost;
     total_ms += r.timings.total_ms;
     const auto& t = r.timings;
-    csv << StringPrintf("%.6f,%s,%d,%d,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n", frame.timestamp_s,
-                        LocalizationStatusName(r.status), r.markers_used, r.keypoints_used, r.rms_px,
-                        r.position_sigma_mm, t.detection_ms,
-                        t.keypoints_ms, t.matching_ms, t.pnp_ms, t.refinement_ms, t.total_ms);
+    csv << StringPrintf("%.6f,%s,%d,%d,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,", frame.timestamp_s,
+                        LocalizationStatusName(r.status), r.markers_used, r.keypoints_used,
+                        r.rms_px, r.position_sigma_mm, t.detection_ms, t.keypoints_ms,
+                        t.matching_ms, t.pnp_ms, t.refinement_ms, t.total_ms);
+    // Why a frame is lost, as the localiser says it (a quoted CSV field).
+    std::string why;
+    for (char c : r.ok ? std::string() : r.message)
+      why += c == '"' ? std::string("\"\"") : std::string(1, c);
+    csv << '"' << why << "\"\n";
   }
   WriteTrajectory(out_path, poses,
                   StringPrintf("arpos localize %s: room_from_camera (camera -> room), room map %lld of plan %lld",

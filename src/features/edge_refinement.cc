@@ -557,6 +557,9 @@ std::string EdgeRefinementOptions::Validate() const {
   if (!(segment_length_px >= 1.0)) return "segment_length_px must be at least 1";
   if (!(max_segment_offset_px > 0)) return "max_segment_offset_px must be positive";
   if (!(max_segment_contrast_change > 0)) return "max_segment_contrast_change must be positive";
+  if (!(min_contrast_grey >= 0) || !(min_contrast_to_noise >= 0)) {
+    return "min_contrast_grey and min_contrast_to_noise must be non-negative";
+  }
   if (min_pixels_per_edge < kLocal) {
     return StringPrintf("min_pixels_per_edge must be at least %d", kLocal);
   }
@@ -777,8 +780,10 @@ CornerRefinementResult Refine(const cv::Mat& gray, const std::array<Eigen::Vecto
         return fail(StringPrintf("edge %d moved out of its band", k));
       }
     }
-    if (contrast < options.min_contrast_grey) {
-      return fail(StringPrintf("contrast %.1f grey levels is too low", contrast));
+    if (contrast <
+        std::max(options.min_contrast_grey, options.min_contrast_to_noise * fit.noise_grey)) {
+      return fail(StringPrintf("contrast %.1f grey levels is too low (noise %.2f)", contrast,
+                               fit.noise_grey));
     }
 
     double moved = 0;

@@ -114,7 +114,15 @@ struct EdgeRefinementOptions {
   double max_segment_offset_px = 0.3;
   /// ...or its contrast differs from the edge's by more than this fraction.
   double max_segment_contrast_change = 0.35;
-  double min_contrast_grey = 15.0;  ///< weaker edges fail
+  /// Weaker edges fail: the contrast (white minus black, in the response's
+  /// linear grey levels) must reach min_contrast_to_noise times the image
+  /// noise the fit measured along the edges, and at least min_contrast_grey.
+  /// What an edge's contrast is worth beyond that is in its corners' sigmas.
+  /// (A fixed 15 grey levels refused every room marker of a dark, linearly
+  /// encoded recording read as sRGB: 7-9 levels at a noise of 0.5, while
+  /// OpenCV read them and their edges fitted.)
+  double min_contrast_grey = 4.0;
+  double min_contrast_to_noise = 10.0;
   /// Priors that keep ill-determined parameters of thin bands (tiny markers)
   /// near marker-wide values: black/white levels and their gradients around
   /// the bands' percentiles (grey levels, 1 sigma) and, after the first pass,

@@ -132,9 +132,12 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
       }
       frames_used += used ? 1 : 0;
     }
+    ResponseEstimate est = EstimateCameraResponse(markers, plain_fallback, options.estimation);
+    // A later round that finds too few markers under the new curve keeps the
+    // earlier round's estimate, and says that one.
+    if (!est.ok && round > 0) break;
     out.frames_used = frames_used;
     out.markers_used = static_cast<int>(markers.size());
-    ResponseEstimate est = EstimateCameraResponse(markers, plain_fallback, options.estimation);
     out.estimate = est;
     if (!est.ok) break;
     const double change = est.response.MaxDifference(current);
@@ -143,13 +146,67 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
     out.estimated = true;
     if (change < 0.002) break;
   }
+  std::string standard_note;
+  if (!out.estimated && !options.standard_curves.empty()) {
+    // Every marker of the response's frames refined under each standard curve.
+    std::vector<std::pair<std::string, int>> counts;
+    int views = 0;
+    const auto refined_under = [&](const CameraResponse& curve) {
+      edge.response = curve;
+      int refined = 0;
+      views = 0;
+      for (const ResponseFrame& f : read) {
+        if (f.sharpening_only) continue;
+        for (const MarkerObservation& m : f.markers) {
+          ++views;
+          refined +=
+              RefineMarkerCorners(f.gray, m.detected_corners_px, edge, undistorter, &workspace)
+                          .status == MarkerStatus::kRefined
+                  ? 1
+                  : 0;
+        }
+      }
+      return refined;
+    };
+    const int under_fallback = refined_under(plain_fallback);
+    std::string best;
+    int best_count = under_fallback;
+    for (const std::string& name : options.standard_curves) {
+      const CameraResponse curve = CameraResponse::FromName(name);
+      const int n =
+          curve.MaxDifference(plain_fallback) < 1e-9 ? under_fallback : refined_under(curve);
+      counts.emplace_back(name, n);
+      if (n > best_count) best = name, best_count = n;
+    }
+    std::string list;
+    for (const auto& [name, n] : counts)
+      list += StringPrintf("%s%s %d", list.empty() ? "" : ", ", name.c_str(), n);
+    if (!best.empty() && best_count >= options.standard_min_ratio * under_fallback &&
+        best_count - under_fallback >= options.standard_min_gain) {
+      out.response = CameraResponse::FromName(best).WithSharpening(amount, sigma);
+      out.chosen_standard = true;
+      standard_note = StringPrintf(
+          "; %s chosen: the markers' edges fit it clearly better (of %d marker views, refined: %s)",
+          best.c_str(), views, list.c_str());
+    } else {
+      standard_note = StringPrintf(
+          "; no standard curve fitted the markers' edges clearly better (of %d marker views, "
+          "refined: %s)",
+          views, list.c_str());
+    }
+  }
   if (out.estimated) {
     out.message = StringPrintf("camera response %s, in %d frames", out.estimate.message.c_str(),
                                out.frames_used);
+  } else if (out.chosen_standard) {
+    out.message =
+        StringPrintf("camera response not estimated (%s, in %d frames)%s",
+                     out.estimate.message.c_str(), out.frames_used, standard_note.c_str());
   } else {
     out.message = StringPrintf("camera response not estimated (%s, in %d frames); assumed %s",
                                out.estimate.message.c_str(), out.frames_used,
                                fallback.name().c_str());
+    out.message += standard_note;
   }
   if (options.estimate_sharpening && (out.sharpening.ok || amount == 0)) {
     out.message += "; " + out.sharpening.message;

@@ -86,7 +86,13 @@ struct RoomMapBuildOptions {
   /// Depth readings that spread around the colour geometry by more than
   /// this many times the sensor model's noise are weighted as that spread.
   double depth_inflation_threshold = 1.5;
-  RecordingResponseOptions response;
+  /// With the standard curves tried when the response cannot be estimated
+  /// (RecordingResponseOptions::standard_curves).
+  RecordingResponseOptions response = [] {
+    RecordingResponseOptions o;
+    o.standard_curves = {"linear", "gamma1.6", "srgb", "gamma2.6"};
+    return o;
+  }();
   int frame_step = 1;   ///< use every n-th frame
   int max_frames = 0;   ///< 0 = all
   int threads = 2;      ///< frame processing and Ceres

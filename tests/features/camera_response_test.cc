@@ -58,8 +58,9 @@ struct Recording {
   std::vector<std::vector<MarkerTruth>> truth;  // per frame, matching the detections by id
 };
 
-Recording Render(const std::function<double(double)>& encode, int frames, unsigned seed, double sharpen = 0,
-                 double noise_grey = 1.5, double min_side_px = 28, double max_side_px = 90) {
+Recording Render(const std::function<double(double)>& encode, int frames, unsigned seed,
+                 double sharpen = 0, double noise_grey = 1.5, double min_side_px = 28,
+                 double max_side_px = 90, double exposure_scale = 1.0) {
   Recording rec;
   std::mt19937 rng(seed);
   const CameraIntrinsics cam = VgaCamera();
@@ -75,7 +76,11 @@ Recording Render(const std::function<double(double)>& encode, int frames, unsign
     render.sharpen_amount = sharpen;
     std::vector<MarkerPlacement> placements =
         RandomPlacements(cam, 6, min_side_px, max_side_px, 55, 0.1, 10 * f, &rng);
-    const double e = exposure(rng);
+    const double e = exposure_scale * exposure(rng);
+    if (exposure_scale != 1.0) {  // a dark scene: the background too
+      render.textured_background = false;
+      render.background_grey = 255 * encode(0.3 * e);
+    }
     for (MarkerPlacement& p : placements) {
       // Levels given as they appear in a linear image, then encoded: black ink
       // reflects ~4 %, white paper ~80 %, times the exposure (marker_render
@@ -420,6 +425,47 @@ TEST(CameraResponse, FallsBackWhenTheDataCannotTell) {
   EXPECT_FALSE(est.estimated);
   EXPECT_EQ(est.response.name(), "gamma2.20");
   EXPECT_NE(est.message.find("not estimated"), std::string::npos) << est.message;
+}
+
+TEST(CameraResponse, WithNoMarkerLargeEnoughTheStandardCurveTheEdgesFitIsChosen) {
+  // Small markers (cells under 4 px: nothing to estimate from), rendered
+  // linear or sRGB; the fallback is sRGB, the plan's standard curves tried.
+  RecordingResponseOptions options;
+  options.standard_curves = {"linear", "gamma1.6", "srgb", "gamma2.6"};
+  MarkerDetectorOptions detector;
+  const auto srgb = [](double x) {
+    return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055;
+  };
+  for (const bool linear : {true, false}) {
+    SCOPED_TRACE(linear ? "linear camera" : "sRGB camera");
+    Recording rec = linear ? Render([](double x) { return x; }, 24, 11, 0, 0.5, 14, 22, 0.2)
+                           : Render(srgb, 24, 11, 0, 0.5, 14, 22, 0.2);
+    const RecordingResponse est =
+        EstimateResponseFromFrames(rec.frames, detector, CameraResponse::Srgb(), options);
+    EXPECT_FALSE(est.estimated);
+    EXPECT_EQ(est.chosen_standard, linear) << est.message;
+    EXPECT_EQ(est.response.name(), linear ? "linear" : "srgb") << est.message;
+    // Without standard curves (a session's, a tracking run's) the fallback stays.
+    const RecordingResponse kept =
+        EstimateResponseFromFrames(rec.frames, detector, CameraResponse::Srgb());
+    EXPECT_FALSE(kept.chosen_standard);
+    EXPECT_EQ(kept.response.name(), "srgb");
+  }
+}
+
+TEST(CameraResponse, AnEstimateIsKeptAndSaidWhenALaterRoundFindsTooFewMarkers) {
+  // Estimated in the first round from the few markers large enough; refined
+  // under the estimate, fewer of them qualify in the second: the first
+  // round's estimate is returned and its message says so (it said the
+  // second's "3 markers large enough, 6 needed").
+  const Recording rec = Render([](double x) { return x; }, 24, 21, 0, 0.5, 14, 24);
+  const RecordingResponse est =
+      EstimateResponseFromFrames(rec.frames, MarkerDetectorOptions(), CameraResponse::Srgb());
+  ASSERT_TRUE(est.estimated) << est.message;
+  EXPECT_EQ(est.message.rfind("camera response estimated from", 0), 0u) << est.message;
+  EXPECT_LT(est.response.MaxDifference(CameraResponse::Linear(), 16, 240),
+            est.response.MaxDifference(CameraResponse::Srgb(), 16, 240))
+      << est.message;
 }
 
 }  // namespace

@@ -25,11 +25,14 @@ struct SingleMarker {
 
 SingleMarker RenderOne(double side_px, double tilt_deg, unsigned seed,
                        const RenderOptions& render = RenderOptions(),
-                       const Eigen::Vector2d& centre = Eigen::Vector2d(330.3, 228.7)) {
+                       const Eigen::Vector2d& centre = Eigen::Vector2d(330.3, 228.7),
+                       double black_grey = 30, double white_grey = 215) {
   std::mt19937 rng(seed);
   const CameraIntrinsics cam = VgaCamera();
   MarkerPlacement m;
   m.id = 7;
+  m.black_grey = black_grey;
+  m.white_grey = white_grey;
   m.camera_from_marker = MarkerPoseForView(cam, centre, side_px, 0.03, tilt_deg, &rng);
   std::vector<MarkerTruth> truth;
   SingleMarker out;
@@ -234,6 +237,39 @@ TEST(EdgeRefinement, GammaEncodedImagesNeedLinearising) {
               bias_raw, bias_linearised);
   EXPECT_LT(bias_raw, -1.0);
   EXPECT_LT(std::abs(bias_linearised), 0.15);
+}
+
+TEST(EdgeRefinement, ADimMarkerIsRefinedWhenItsEdgesStandAboveTheNoise) {
+  // A dark scene (white 14, black 3 grey levels, noise 0.4): the edges stand
+  // 25 times above the noise and are refined, their sigmas saying what
+  // they are worth; a fixed 15-level floor refused such markers outright.
+  RenderOptions dark;
+  dark.textured_background = false;
+  dark.background_grey = 9;
+  dark.noise_sigma_grey = 0.4;
+  RenderOptions bright;
+  bright.noise_sigma_grey = 0.4;
+  for (unsigned seed = 1; seed <= 4; ++seed) {
+    const Eigen::Vector2d centre(330.3, 228.7);
+    const SingleMarker m = RenderOne(32, 20, 300 + seed, dark, centre, 3, 14);
+    const auto start = Perturbed(m.truth.corners_px, 0.5, seed);
+    const CornerRefinementResult r = RefineMarkerCorners(m.image, start);
+    ASSERT_EQ(r.status, MarkerStatus::kRefined) << r.failure;
+    EXPECT_LT(r.contrast_grey, 15);
+    EXPECT_LT(MaxCornerError(r.corners_px, m.truth.corners_px), 0.3);
+    const CornerRefinementResult b =
+        RefineMarkerCorners(RenderOne(32, 20, 300 + seed, bright).image, start);
+    ASSERT_EQ(b.status, MarkerStatus::kRefined) << b.failure;
+    EXPECT_GT(r.corner_sigma_px[0], 3 * b.corner_sigma_px[0]);
+  }
+  // Edges that do not stand ten times above the noise still fail.
+  RenderOptions noisy = dark;
+  noisy.noise_sigma_grey = 1.5;
+  const SingleMarker m = RenderOne(32, 20, 310, noisy, Eigen::Vector2d(330.3, 228.7), 8, 14);
+  const CornerRefinementResult r =
+      RefineMarkerCorners(m.image, Perturbed(m.truth.corners_px, 0.5, 1));
+  EXPECT_EQ(r.status, MarkerStatus::kRefinementFailed);
+  EXPECT_NE(r.failure.find("too low"), std::string::npos) << r.failure;
 }
 
 TEST(EdgeRefinement, RejectsBadInput) {

@@ -8,6 +8,7 @@
 #include <iostream>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include <optional>
 
@@ -20,6 +21,7 @@
 #include "sensor/sequence.h"
 #include "sensor/tum_io.h"
 #include "util/file.h"
+#include "util/string_util.h"
 
 namespace arpos {
 namespace {
@@ -830,6 +832,43 @@ TEST(PlanningCli, PlanThenLocalizeWritesOnePosePerLocalisedFrame) {
   for (const auto& [i, j] : pairs) {
     EXPECT_LT(ComputePoseError(gt[i].room_from_x, poses[j].room_from_x).translation_mm, 6.0);
   }
+
+  // A frame that shows nothing (black, no depth) is lost, and the timings
+  // say why, as the localiser does; localised frames leave the field empty.
+  const fs::path blind = dir.path() / "blind";
+  fs::copy(seq_dir, blind, fs::copy_options::recursive);
+  const Sequence seq = Sequence::Open(blind);
+  const RgbdFrame third = seq.LoadFrame(2, c.folder.config.camera);
+  const std::string stamp = StringPrintf("%.6f", third.timestamp_s);
+  for (const fs::directory_entry& e : fs::recursive_directory_iterator(blind)) {
+    if (e.path().extension() != ".png" || e.path().stem().string() != stamp) continue;
+    const cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
+    cv::imwrite(e.path().string(), cv::Mat::zeros(img.size(), img.type()));
+  }
+  const fs::path timings = dir.path() / "timings.csv";
+  r = RunArpos("localize " + blind.string() + " --case " + c.root.string() + " --store " +
+               store.string() + " --out " + out.string() + " --timings " + timings.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream csv(timings);
+  std::string line;
+  ASSERT_TRUE(std::getline(csv, line));
+  EXPECT_NE(line.find(",why_lost"), std::string::npos) << line;
+  int rows = 0, lost = 0;
+  while (std::getline(csv, line)) {
+    ++rows;
+    const bool is_lost = line.find(",lost,") != std::string::npos;
+    lost += is_lost ? 1 : 0;
+    if (line.rfind(stamp, 0) == 0) {
+      EXPECT_TRUE(is_lost) << line;
+      EXPECT_NE(line.find(",\"0 map marker(s) and 0 keypoints found; too few agree on a pose"),
+                std::string::npos)
+          << line;
+    } else if (!is_lost) {
+      EXPECT_EQ(line.substr(line.size() - 3), ",\"\"") << line;
+    }
+  }
+  EXPECT_EQ(rows, static_cast<int>(gt.size()));
+  EXPECT_GE(lost, 1);
 }
 
 TEST(PlanningCli, LocalizeWithoutARoomMapIsAClearError) {
