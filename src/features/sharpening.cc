@@ -135,6 +135,9 @@ std::string SharpeningEstimationOptions::Validate() const {
     out << "sharpening profile settings must be positive";
   } else if (!(min_overshoot >= 0 && min_overshoot < 1)) {
     out << "min_overshoot must be within [0, 1)";
+  } else if (clip_codes < 0 || clip_codes > 50 ||
+             !(max_clipped_fraction >= 0 && max_clipped_fraction <= 1)) {
+    out << "clip_codes must be within [0, 50] and max_clipped_fraction within [0, 1]";
   }
   return out.str();
 }
@@ -169,13 +172,66 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
     const MarkerObservation* marker;
     double cell_px;
   };
+  // The pixels across the middle of each of a marker's outer edges within
+  // `half_width` (indices into `outer`); `clipped` counts the edges left out
+  // because their halo is clipped at black or white: it cannot be undone,
+  // and what is left of it is not the mask's shape (a linear camera whose
+  // black reads 0: amount 2.3 found for a true 0.8).
+  const auto edges_of = [&](const cv::Mat& gray, const MarkerObservation& m, const cv::Rect& outer,
+                            double half_width, int* clipped) {
+    std::vector<EdgeSamples> edges;
+    const auto& q = m.corners_px;
+    const cv::Rect read = MarkerReadRegion(q, cells_per_side, gray.size());
+    const Eigen::Vector2d centre = 0.25 * (q[0] + q[1] + q[2] + q[3]);
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector2d a = q[k], b = q[(k + 1) % 4];
+      const double length = (b - a).norm();
+      if (!(length > 4)) continue;
+      const Eigen::Vector2d along = (b - a) / length;
+      Eigen::Vector2d normal(-along.y(), along.x());
+      if (normal.dot(a - centre) < 0) normal = -normal;  // outwards, to the quiet zone
+      EdgeSamples edge;
+      int at_limit = 0;
+      for (int y = read.y; y < read.y + read.height; ++y) {
+        for (int x = read.x; x < read.x + read.width; ++x) {
+          const Eigen::Vector2d p(x - a.x(), y - a.y());
+          const double t = p.dot(along) / length;
+          if (t < 0.2 || t > 0.8) continue;
+          const double d = p.dot(normal);
+          if (std::abs(d) >= half_width) continue;
+          edge.index.push_back((y - outer.y) * outer.width + (x - outer.x));
+          edge.distance_px.push_back(static_cast<float>(d));
+          const int code = gray.at<std::uint8_t>(y, x);
+          at_limit += code <= options.clip_codes || code >= 255 - options.clip_codes ? 1 : 0;
+        }
+      }
+      if (at_limit > options.max_clipped_fraction * static_cast<double>(edge.index.size())) {
+        ++*clipped;
+        continue;
+      }
+      if (edge.index.size() >= 40) edges.push_back(std::move(edge));
+    }
+    return edges;
+  };
+
   std::vector<Candidate> candidates;
+  int clipped_views = 0;
   for (size_t f = 0; f < grays.size(); ++f) {
     if (grays[f] == nullptr || grays[f]->type() != CV_8UC1 || markers[f] == nullptr) continue;
     for (const MarkerObservation& m : *markers[f]) {
       if (m.status != MarkerStatus::kRefined) continue;
       const double cell = MarkerCellWidthPx(m, cells_per_side);
-      if (cell > 0) candidates.push_back({f, &m, cell});
+      if (!(cell > 0)) continue;
+      // A view with a clipped edge at the reach it could have is not used.
+      int clipped = 0;
+      const cv::Rect read = MarkerReadRegion(m.corners_px, cells_per_side, grays[f]->size());
+      if (read.area() == 0) continue;
+      edges_of(*grays[f], m, read, std::min(reach, 0.6 * cell), &clipped);
+      if (clipped > 0) {
+        ++clipped_views;
+        continue;
+      }
+      candidates.push_back({f, &m, cell});
     }
   }
   std::sort(candidates.begin(), candidates.end(),
@@ -188,45 +244,28 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   const long wide_enough = std::count_if(candidates.begin(), candidates.end(),
                                          [&](const Candidate& c) { return c.cell_px >= needed_cell_px - 1e-9; });
   if (candidates.size() < enough || reach < options.min_profile_half_width_px) {  // halos would not fade inside
-    out.message = StringPrintf("camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, %zu "
-                               "needed)",
-                               wide_enough, needed_cell_px, enough);
+    out.message = StringPrintf(
+        "camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, %zu "
+        "needed%s)",
+        wide_enough, needed_cell_px, enough,
+        clipped_views > 0
+            ? StringPrintf("; %d left out, clipped at black or white", clipped_views).c_str()
+            : "");
     return out;
   }
   while (!candidates.empty() && 0.6 * candidates.back().cell_px < reach - 1e-9) candidates.pop_back();
   if (static_cast<int>(candidates.size()) > options.max_markers) candidates.resize(options.max_markers);
 
   std::vector<MarkerPatch> patches;
+  int clipped_edges = 0;
   for (const Candidate& c : candidates) {
     const cv::Mat& gray = *grays[c.frame];
-    const auto& q = c.marker->corners_px;
-    const cv::Rect read = MarkerReadRegion(q, cells_per_side, gray.size());
+    const cv::Rect read = MarkerReadRegion(c.marker->corners_px, cells_per_side, gray.size());
     if (read.area() == 0) continue;
     MarkerPatch patch;
     patch.gray = &gray;
     patch.outer = Grown(read, margin, gray.size());
-    const Eigen::Vector2d centre = 0.25 * (q[0] + q[1] + q[2] + q[3]);
-    for (int k = 0; k < 4; ++k) {
-      const Eigen::Vector2d a = q[k], b = q[(k + 1) % 4];
-      const double length = (b - a).norm();
-      if (!(length > 4)) continue;
-      const Eigen::Vector2d along = (b - a) / length;
-      Eigen::Vector2d normal(-along.y(), along.x());
-      if (normal.dot(a - centre) < 0) normal = -normal;  // outwards, to the quiet zone
-      EdgeSamples edge;
-      for (int y = read.y; y < read.y + read.height; ++y) {
-        for (int x = read.x; x < read.x + read.width; ++x) {
-          const Eigen::Vector2d p(x - a.x(), y - a.y());
-          const double t = p.dot(along) / length;
-          if (t < 0.2 || t > 0.8) continue;
-          const double d = p.dot(normal);
-          if (std::abs(d) >= reach) continue;
-          edge.index.push_back((y - patch.outer.y) * patch.outer.width + (x - patch.outer.x));
-          edge.distance_px.push_back(static_cast<float>(d));
-        }
-      }
-      if (edge.index.size() >= 40) patch.edges.push_back(std::move(edge));
-    }
+    patch.edges = edges_of(gray, *c.marker, patch.outer, reach, &clipped_edges);
     if (!patch.edges.empty() && patch.outer.width > 0 && patch.outer.height > 0) patches.push_back(std::move(patch));
   }
 
@@ -278,9 +317,15 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
   const int min_count = 20;
   const ProfileFigures base = Figures(delivered, min_count);
   if (delivered.edges < options.min_edges || !base.valid) {
-    out.message = StringPrintf("camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, "
-                               "%d usable edges of %d needed)",
-                               wide_enough, needed_cell_px, delivered.edges, options.min_edges);
+    out.message = StringPrintf(
+        "camera sharpening not estimated (%ld marker view(s) with cells of at least %.1f px, "
+        "%d usable edges of %d needed%s)",
+        wide_enough, needed_cell_px, delivered.edges, options.min_edges,
+        clipped_views + clipped_edges > 0
+            ? StringPrintf("; %d marker view(s) and %d edge(s) left out, clipped at black or white",
+                           clipped_views, clipped_edges)
+                  .c_str()
+            : "");
     return out;
   }
   out.ok = true;

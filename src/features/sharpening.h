@@ -75,6 +75,15 @@ struct SharpeningEstimationOptions {
   double bin_px = 0.25;
   /// Edges with less contrast (codes) are not used.
   double min_contrast_codes = 20;
+  /// Edges with more than max_clipped_fraction of their profile's pixels
+  /// within clip_codes of 0 or 255 are not used, nor any marker view with
+  /// such an edge (before the reach is chosen): a clipped halo cannot be
+  /// undone, and what is left of it is not the mask's shape (a simulated
+  /// linear, auto-exposed camera whose black reads 0 over whole cells:
+  /// amount 2.3 found for a true 0.8, the room map's couch-side markers 2
+  /// mm off instead of 0.3-0.8).
+  int clip_codes = 1;
+  double max_clipped_fraction = 0.1;
   /// Fewer edges (min_edges / 4 marker views set the reach): not
   /// estimated, and the caller keeps what it had (the fallback response's).
   int min_edges = 32;
