@@ -249,7 +249,9 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
         "needed%s)",
         wide_enough, needed_cell_px, enough,
         clipped_views > 0
-            ? StringPrintf("; %d left out, clipped at black or white", clipped_views).c_str()
+            ? StringPrintf("; %d other view(s) left out: their edges are clipped at black or white",
+                           clipped_views)
+                  .c_str()
             : "");
     return out;
   }
@@ -322,7 +324,7 @@ SharpeningEstimate EstimateSharpening(const std::vector<const cv::Mat*>& grays,
         "%d usable edges of %d needed%s)",
         wide_enough, needed_cell_px, delivered.edges, options.min_edges,
         clipped_views + clipped_edges > 0
-            ? StringPrintf("; %d marker view(s) and %d edge(s) left out, clipped at black or white",
+            ? StringPrintf("; %d view(s) and %d edge(s) left out: clipped at black or white",
                            clipped_views, clipped_edges)
                   .c_str()
             : "");
