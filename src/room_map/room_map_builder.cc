@@ -479,12 +479,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       // wide, and the map came out 1.2 % small (25 mm at the couch).
       report.warnings.push_back(StringPrintf(
           "the camera's tone curve could not be estimated from this recording (%d marker view(s) "
-          "large enough, "
-          "%d needed); %s is %s: if the camera encodes otherwise, the markers read up to a few "
-          "tenths of a "
-          "pixel wide and the map's scale may be off by up to a percent; record the room again "
-          "with some room "
-          "markers seen close (cells of 4 px or more)",
+          "large enough, %d needed); %s is %s: if the camera encodes otherwise, the markers read "
+          "up to a few tenths of a pixel wide and the map's scale may be off by up to a percent; "
+          "record the room again with some room markers seen close (cells of 4 px or more)",
           rr.estimate.markers_used, options.response.estimation.min_markers,
           rr.response.name().c_str(),
           rr.chosen_standard ? "used, the standard curve the markers' edges fit best" : "assumed"));
