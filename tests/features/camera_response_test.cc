@@ -455,13 +455,10 @@ TEST(CameraResponse, WithNoMarkerLargeEnoughTheStandardCurveTheEdgesFitIsChosen)
   RecordingResponseOptions options;
   options.standard_curves = {"linear", "gamma1.6", "srgb", "gamma2.6"};
   MarkerDetectorOptions detector;
-  const auto srgb = [](double x) {
-    return x <= 0.0031308 ? 12.92 * x : 1.055 * std::pow(x, 1 / 2.4) - 0.055;
-  };
   for (const bool linear : {true, false}) {
     SCOPED_TRACE(linear ? "linear camera" : "sRGB camera");
     Recording rec = linear ? Render([](double x) { return x; }, 24, 11, 0, 0.5, 14, 22, 0.2)
-                           : Render(srgb, 24, 11, 0, 0.5, 14, 22, 0.2);
+                           : Render(SrgbEncode, 24, 11, 0, 0.5, 14, 22, 0.2);
     const RecordingResponse est =
         EstimateResponseFromFrames(rec.frames, detector, CameraResponse::Srgb(), options);
     EXPECT_FALSE(est.estimated);
