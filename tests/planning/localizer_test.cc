@@ -840,11 +840,14 @@ TEST(PlanningCli, PlanThenLocalizeWritesOnePosePerLocalisedFrame) {
   const Sequence seq = Sequence::Open(blind);
   const RgbdFrame third = seq.LoadFrame(2, c.folder.config.camera);
   const std::string stamp = StringPrintf("%.6f", third.timestamp_s);
+  int blanked = 0;
   for (const fs::directory_entry& e : fs::recursive_directory_iterator(blind)) {
     if (e.path().extension() != ".png" || e.path().stem().string() != stamp) continue;
     const cv::Mat img = cv::imread(e.path().string(), cv::IMREAD_UNCHANGED);
     cv::imwrite(e.path().string(), cv::Mat::zeros(img.size(), img.type()));
+    ++blanked;
   }
+  ASSERT_EQ(blanked, 2) << "the colour and depth images of frame " << stamp;
   const fs::path timings = dir.path() / "timings.csv";
   r = RunArpos("localize " + blind.string() + " --case " + c.root.string() + " --store " +
                store.string() + " --out " + out.string() + " --timings " + timings.string());
@@ -854,11 +857,13 @@ TEST(PlanningCli, PlanThenLocalizeWritesOnePosePerLocalisedFrame) {
   ASSERT_TRUE(std::getline(csv, line));
   EXPECT_NE(line.find(",why_lost"), std::string::npos) << line;
   int rows = 0, lost = 0;
+  bool blind_row = false;
   while (std::getline(csv, line)) {
     ++rows;
     const bool is_lost = line.find(",lost,") != std::string::npos;
     lost += is_lost ? 1 : 0;
     if (line.rfind(stamp, 0) == 0) {
+      blind_row = true;
       EXPECT_TRUE(is_lost) << line;
       EXPECT_NE(line.find(",\"0 map marker(s) and 0 keypoints found; too few agree on a pose"),
                 std::string::npos)
@@ -868,6 +873,7 @@ TEST(PlanningCli, PlanThenLocalizeWritesOnePosePerLocalisedFrame) {
     }
   }
   EXPECT_EQ(rows, static_cast<int>(gt.size()));
+  EXPECT_TRUE(blind_row);
   EXPECT_GE(lost, 1);
 }
 
