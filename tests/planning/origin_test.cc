@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <optional>
 #include <string>
 
@@ -405,38 +406,67 @@ TEST(RoomMapDepth, AScaleErrorOfTheDepthIsFoundFromTheMarkersAndRemoved) {
   EXPECT_NEAR(fit->scale, 1.0, 0.001);
 }
 
+// A camera of focal length `focal` (640x480) over a floor whose normal is
+// turned `down_deg` about the camera's x axis from straight up, and a square
+// marker of `side` lying on it at `centre`: the floor's depth image (plus
+// `noise_m(u, v)`; readings beyond `max_range_m` left empty), the marker's
+// axes in its plane and its projected corners.
+struct MarkerOnFloor {
+  CameraIntrinsics k;
+  Eigen::Vector3d normal, x_axis, y_axis;
+  double offset = 0;  ///< normal . p for every point p of the floor
+  cv::Mat depth;
+  std::array<Eigen::Vector2d, 4> corners;
+};
+
+MarkerOnFloor RenderMarkerOnFloor(double focal, double down_deg, const Eigen::Vector3d& centre,
+                                  double side, double max_range_m,
+                                  const std::function<double(int, int)>& noise_m) {
+  MarkerOnFloor out;
+  CameraIntrinsics& k = out.k;
+  k.width = 640;
+  k.height = 480;
+  k.fx = k.fy = focal;
+  k.cx = 319.5;
+  k.cy = 239.5;
+  k.depth_scale = 1000;
+  out.normal = Eigen::AngleAxisd(-down_deg * M_PI / 180, Eigen::Vector3d::UnitX()) *
+               Eigen::Vector3d(0, -1, 0);
+  out.offset = out.normal.dot(centre);
+  out.depth = cv::Mat(k.height, k.width, CV_16UC1);
+  for (int v = 0; v < k.height; ++v) {
+    for (int u = 0; u < k.width; ++u) {
+      const Eigen::Vector3d ray((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1);
+      const double z = out.offset / out.normal.dot(ray);
+      out.depth.at<uint16_t>(v, u) =
+          z > 0 && z < max_range_m ? static_cast<uint16_t>(std::lround((z + noise_m(u, v)) * 1000))
+                                   : 0;
+    }
+  }
+  out.x_axis = Eigen::Vector3d::UnitX();
+  out.y_axis = out.normal.cross(out.x_axis).normalized();
+  const double h = side / 2;
+  const std::array<Eigen::Vector2d, 4> square = {{{-h, h}, {h, h}, {h, -h}, {-h, -h}}};
+  for (int c = 0; c < 4; ++c) {
+    out.corners[c] = k.Project(centre + square[c].x() * out.x_axis + square[c].y() * out.y_axis);
+  }
+  return out;
+}
+
 // The origin's support plane: depth sampled on a grid around the marker in
 // its own plane lands on that plane, within the square asked for, and not
 // from behind the camera or outside the image.
 TEST(RoomMapOrigin, SupportDepthIsSampledOnTheMarkersPlaneAroundIt) {
-  CameraIntrinsics k;
-  k.width = 640;
-  k.height = 480;
-  k.fx = k.fy = 570;
-  k.cx = 319.5;
-  k.cy = 239.5;
-  k.depth_scale = 1000;
-  // A floor 1.5 m below the camera, seen 40 deg down; the marker 2 m ahead.
-  const Eigen::Vector3d normal = Eigen::AngleAxisd(-40 * M_PI / 180, Eigen::Vector3d::UnitX()) *
-                                 Eigen::Vector3d(0, -1, 0);
+  // A floor seen 40 deg down; the marker 2 m ahead.
   const Eigen::Vector3d centre(0.1, 0.4, 2.0);
-  const double d = normal.dot(centre);
-  cv::Mat depth(k.height, k.width, CV_16UC1);
-  for (int v = 0; v < k.height; ++v) {
-    for (int u = 0; u < k.width; ++u) {
-      const Eigen::Vector3d ray((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1);
-      const double z = d / normal.dot(ray);
-      depth.at<uint16_t>(v, u) = z > 0 && z < 60 ? static_cast<uint16_t>(std::lround(z * 1000)) : 0;
-    }
-  }
-  // Marker axes in the plane.
-  const Eigen::Vector3d x_axis = Eigen::Vector3d::UnitX();
-  const Eigen::Vector3d y_axis = normal.cross(x_axis).normalized();
   const double side = 0.15;
-  std::array<Eigen::Vector2d, 4> corners;
-  const double h = side / 2;
-  const std::array<Eigen::Vector2d, 4> square = {{{-h, h}, {h, h}, {h, -h}, {-h, -h}}};
-  for (int c = 0; c < 4; ++c) corners[c] = k.Project(centre + square[c].x() * x_axis + square[c].y() * y_axis);
+  const MarkerOnFloor f =
+      RenderMarkerOnFloor(570, 40, centre, side, 60, [](int, int) { return 0.0; });
+  const CameraIntrinsics& k = f.k;
+  const Eigen::Vector3d &normal = f.normal, &x_axis = f.x_axis, &y_axis = f.y_axis;
+  const double d = f.offset;
+  const cv::Mat& depth = f.depth;
+  const std::array<Eigen::Vector2d, 4>& corners = f.corners;
   const double half_width = 0.4;
   const std::vector<DepthSample> samples = SampleSupportDepth(depth, corners, k, side, half_width, 900);
   ASSERT_GT(samples.size(), 400u);
@@ -460,36 +490,16 @@ TEST(RoomMapOrigin, SupportDepthIsSampledOnTheMarkersPlaneAroundIt) {
 // Random seed 402 of the sweep (a 31 px origin at 59 deg, --hard, linear
 // response) stopped the plan when the pose's own offset was used.
 TEST(RoomMapOrigin, ALoneViewsSolutionIsToldByItsPlaneEvenWhenItsDistanceIsOff) {
-  CameraIntrinsics k;
-  k.width = 640;
-  k.height = 480;
-  k.fx = k.fy = 540;
-  k.cx = 319.5;
-  k.cy = 239.5;
-  k.depth_scale = 1000;
-  // A floor seen 31 deg down (59 deg from face-on); the marker 2.3 m ahead.
-  const Eigen::Vector3d normal =
-      Eigen::AngleAxisd(-31 * M_PI / 180, Eigen::Vector3d::UnitX()) * Eigen::Vector3d(0, -1, 0);
+  // A floor seen 31 deg down (59 deg from face-on); the marker 2.3 m ahead;
+  // the sensor's noise as a fixed pattern (+-1 sigma at 2.3 m for the xtion).
   const Eigen::Vector3d centre = 2.3 * Eigen::Vector3d(0.05, 0.15, 1).normalized();
-  const double d = normal.dot(centre);
-  cv::Mat depth(k.height, k.width, CV_16UC1);
-  for (int v = 0; v < k.height; ++v) {
-    for (int u = 0; u < k.width; ++u) {
-      const Eigen::Vector3d ray((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1);
-      const double z = d / normal.dot(ray);
-      // The sensor's noise as a fixed pattern (+-1 sigma at 2.3 m for the xtion).
-      const double noise = 0.0074 * std::sin(0.7 * u + 1.3 * v);
-      depth.at<uint16_t>(v, u) =
-          z > 0 && z < 8 ? static_cast<uint16_t>(std::lround((z + noise) * 1000)) : 0;
-    }
-  }
-  const Eigen::Vector3d x_axis = Eigen::Vector3d::UnitX();
-  const Eigen::Vector3d y_axis = normal.cross(x_axis).normalized();
-  const double side = 0.13, h = side / 2;
-  std::array<Eigen::Vector2d, 4> corners;
-  const std::array<Eigen::Vector2d, 4> square = {{{-h, h}, {h, h}, {h, -h}, {-h, -h}}};
-  for (int c = 0; c < 4; ++c)
-    corners[c] = k.Project(centre + square[c].x() * x_axis + square[c].y() * y_axis);
+  const double side = 0.13;
+  const MarkerOnFloor f = RenderMarkerOnFloor(
+      540, 31, centre, side, 8, [](int u, int v) { return 0.0074 * std::sin(0.7 * u + 1.3 * v); });
+  const CameraIntrinsics& k = f.k;
+  const Eigen::Vector3d &normal = f.normal, &x_axis = f.x_axis, &y_axis = f.y_axis;
+  const cv::Mat& depth = f.depth;
+  const std::array<Eigen::Vector2d, 4>& corners = f.corners;
   const std::vector<DepthSample> samples = SampleSupportDepth(depth, corners, k, side, 0.4, 2500);
   ASSERT_GT(samples.size(), 1000u);
 
