@@ -203,21 +203,21 @@ std::optional<int> SolutionBySupportDepth(const MarkerPose& pose, const std::vec
   if (pose.num_solutions != 2 || samples.size() < 50) return std::nullopt;
   std::array<double, 2> cost{0, 0};
   std::array<int, 2> on_plane{0, 0};
+  std::vector<Eigen::Vector3d> rays;  // each sample's ray at unit depth
+  rays.reserve(samples.size());
+  for (const DepthSample& sample : samples) {
+    rays.push_back(K.Unproject(sample.pixel.x(), sample.pixel.y(), 1.0));
+  }
+  std::vector<double> offsets(samples.size());
   for (int k = 0; k < 2; ++k) {
     const Rigid3d& m = pose.solutions[k].camera_from_marker;
     const Eigen::Vector3d n = m.rotation * Eigen::Vector3d::UnitZ();
-    std::vector<double> offsets;
-    offsets.reserve(samples.size());
-    for (const DepthSample& sample : samples) {
-      const Eigen::Vector3d ray((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy,
-                                1);
-      offsets.push_back(n.dot(sample.depth_m * ray));
-    }
+    for (size_t i = 0; i < samples.size(); ++i) offsets[i] = n.dot(samples[i].depth_m * rays[i]);
     std::nth_element(offsets.begin(), offsets.begin() + offsets.size() / 2, offsets.end());
     const double d = offsets[offsets.size() / 2];
-    for (const DepthSample& sample : samples) {
-      const Eigen::Vector3d ray((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy, 1);
-      const double denom = n.dot(ray);
+    for (size_t i = 0; i < samples.size(); ++i) {
+      const DepthSample& sample = samples[i];
+      const double denom = n.dot(rays[i]);
       if (std::abs(denom) < 1e-6) continue;
       const double z = d / denom;
       const double sigma = ba_options.DepthSigmaM(sample.depth_m);
