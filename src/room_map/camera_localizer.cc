@@ -734,11 +734,37 @@ struct CameraLocalizer::Impl {
     if (ldlt.info() != Eigen::Success || !(r.information.diagonal().array() > 0).all()) return false;
     PoseSigmas(ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()), &out->position_sigma_mm, &out->rotation_sigma_deg);
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
+    // The markers place the frame only when their corners alone hold the
+    // pose within the limit: a far, small marker (a 22 px origin at 3 m on
+    // a d435 case, its corners alone leaving 50-70 mm) with a handful of
+    // keypoints gave poses 30-160 mm off at a stated 7-17 mm.
+    double marker_sigma_mm = std::numeric_limits<double>::infinity();
+    if (full >= 1) {
+      const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> marker_ldlt(r.marker_information);
+      if (marker_ldlt.info() == Eigen::Success &&
+          (r.marker_information.diagonal().array() > 0).all()) {
+        double rotation_deg = 0;
+        PoseSigmas(marker_ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()), &marker_sigma_mm,
+                   &rotation_deg);
+      }
+    }
+    out->marker_position_sigma_mm = marker_sigma_mm;
+    const bool markers_hold = marker_sigma_mm <= 1000 * options.max_position_sigma_m;
     const bool by_markers = r.marker_inliers >= options.min_marker_corners && full >= 1 &&
-                            r.marker_rms_px <= options.max_marker_rms_px;
+                            r.marker_rms_px <= options.max_marker_rms_px && markers_hold;
     const int min_keypoints = tracking ? options.min_keypoints_tracking : options.min_keypoints;
     const bool by_keypoints =
         r.keypoint_inliers >= min_keypoints && r.keypoint_rms_px <= options.max_keypoint_rms_px;
+    if (full >= 1 && !markers_hold && !by_keypoints) {
+      std::ostringstream why;
+      why << std::fixed << std::setprecision(0) << full
+          << " room marker(s) seen whole, too small or far to place the camera "
+          << "alone (their corners leave it known to " << marker_sigma_mm << " mm, limit "
+          << 1000 * options.max_position_sigma_m << " mm), and " << r.keypoint_inliers
+          << " keypoints agree (" << min_keypoints << " needed)";
+      out->message = why.str();
+      return false;
+    }
     // Markers that disagree badly with an otherwise keypoint-based pose would
     // mean a wrong pose or a moved marker: require consistency when both exist.
     if (by_keypoints && r.marker_inliers > 0 && r.marker_rms_px > 2 * options.max_marker_rms_px) return false;

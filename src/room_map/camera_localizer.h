@@ -19,7 +19,8 @@
 ///  5. refinement: marker corners and keypoints jointly (and keypoint depth),
 ///     Gauss-Newton with Huber/Tukey losses and a weak motion prior
 ///     (pose_refiner.h); a second matching pass at the refined pose;
-///  6. acceptance: enough inliers (a fully seen marker, or min_keypoints), RMS
+///  6. acceptance: enough inliers (a fully seen marker whose corners alone
+///     hold the pose within max_position_sigma_m, or min_keypoints), RMS
 ///     within bounds;
 ///  7. while tracking, a frame the map does not place is followed from the
 ///     last frame it did (that frame's keypoints with depth, outside the
@@ -31,6 +32,7 @@
 /// pixels of the frame's image. Thread-safety: one CameraLocalizer per thread.
 
 #include <array>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -341,6 +343,10 @@ struct LocalizationResult {
   /// rotation uncertainty (deg) from the refinement's information matrix.
   double position_sigma_mm = 0;
   double rotation_sigma_deg = 0;
+  /// The same from the corners of the room markers seen whole alone
+  /// (infinite: none). Markers place a frame by themselves only when this
+  /// is within max_position_sigma_m; otherwise the keypoints must.
+  double marker_position_sigma_mm = std::numeric_limits<double>::infinity();
   std::string message;       ///< why, when lost
   LocalizationTimings timings;
   /// The room markers found in this frame (image pixels), for callers that

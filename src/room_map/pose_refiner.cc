@@ -102,11 +102,12 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
 
   using Mat6 = Eigen::Matrix<double, 6, 6>;
   using Vec6 = Eigen::Matrix<double, 6, 1>;
-  Mat6 H, H_prior = Mat6::Zero();
+  Mat6 H, H_prior = Mat6::Zero(), H_marker = Mat6::Zero();
   Vec6 g;
   for (int it = 0; it < options.max_iterations; ++it) {
     H.setZero();
     H_prior.setZero();
+    H_marker.setZero();
     g.setZero();
     const bool tukey = it >= options.huber_iterations;
     int used = 0;
@@ -134,6 +135,8 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
       J.rightCols<3>() = Jp;
       J *= s;
       H.noalias() += w * J.transpose() * J;
+      if (corr.group[i] == CorrespondenceGroup::kMarker)
+        H_marker.noalias() += w * J.transpose() * J;
       g.noalias() += w * J.transpose() * Eigen::Vector2d(ru, rv);
       if (corr.inv_sigma_depth[i] > 0) {
         const double sd = corr.inv_sigma_depth[i];
@@ -210,6 +213,7 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   result.camera_from_room = Rigid3d(ProjectToSO3(R), t);
   result.information = H;
   result.data_information = H - H_prior;
+  result.marker_information = H_marker;
 
   // Inliers and residual statistics at the solution.
   double sum_m = 0, sum_k = 0;

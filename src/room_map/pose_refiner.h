@@ -99,6 +99,8 @@ struct PoseRefinementResult {
   Eigen::Matrix<double, 6, 6> information = Eigen::Matrix<double, 6, 6>::Zero();
   /// The same without the prior's share: what the correspondences alone say.
   Eigen::Matrix<double, 6, 6> data_information = Eigen::Matrix<double, 6, 6>::Zero();
+  /// What the marker corners alone say (their pixels, at their weights).
+  Eigen::Matrix<double, 6, 6> marker_information = Eigen::Matrix<double, 6, 6>::Zero();
 };
 
 /// Refines `camera_from_room_initial`. Never throws for bad geometry: with
