@@ -46,6 +46,10 @@ std::string MarkerDetectorOptions::Validate() const {
       adaptive_thresh_win_size_step < 1) {
     return "adaptive threshold window sizes must satisfy 3 <= min <= max and step >= 1";
   }
+  if (second_pass_window_px != 0 && second_pass_window_px < 3) {
+    return StringPrintf("second_pass_window_px must be 0 (none) or at least 3, got %d",
+                        second_pass_window_px);
+  }
   if (opencv_subpix_window_px < 1) return "opencv_subpix_window_px must be positive";
   if (perspective_remove_pixel_per_cell < 2)
     return "perspective_remove_pixel_per_cell must be >= 2";
@@ -62,12 +66,15 @@ bool MarkerDetectorOptions::Check(std::string* reason) const {
 struct MarkerDetector::Impl {
   cv::Ptr<cv::aruco::Dictionary> dictionary;
   cv::Ptr<cv::aruco::DetectorParameters> params;
+  cv::Ptr<cv::aruco::DetectorParameters> second_pass;  // null: none
   EdgeRefinementOptions edge;
   PixelUndistorter undistorter;
   std::vector<std::unique_ptr<EdgeRefinementWorkspace>> workspaces;  // one per thread
   cv::Mat gray;
   std::vector<std::vector<cv::Point2f>> corners;
   std::vector<int> ids;
+  std::vector<std::vector<cv::Point2f>> second_corners;
+  std::vector<int> second_ids;
 };
 
 MarkerDetector::MarkerDetector(const MarkerDetectorOptions& options)
@@ -118,6 +125,12 @@ MarkerDetector::MarkerDetector(const MarkerDetectorOptions& options)
       p.cornerRefinementMethod = cv::aruco::CORNER_REFINE_APRILTAG;
       break;
   }
+  if (options.second_pass_window_px > 0) {
+    m.second_pass = cv::makePtr<cv::aruco::DetectorParameters>(p);
+    m.second_pass->adaptiveThreshWinSizeMin = options.second_pass_window_px;
+    m.second_pass->adaptiveThreshWinSizeMax = options.second_pass_window_px;
+    m.second_pass->adaptiveThreshWinSizeStep = 1;
+  }
 }
 
 MarkerDetector::~MarkerDetector() = default;
@@ -164,6 +177,17 @@ void MarkerDetector::Detect(const cv::Mat& image, std::vector<MarkerObservation>
   m.corners.clear();
   m.ids.clear();
   cv::aruco::detectMarkers(searched, m.dictionary, m.corners, m.ids, m.params);
+  if (m.second_pass) {
+    m.second_pass->minMarkerPerimeterRate = m.params->minMarkerPerimeterRate;
+    m.second_corners.clear();
+    m.second_ids.clear();
+    cv::aruco::detectMarkers(searched, m.dictionary, m.second_corners, m.second_ids, m.second_pass);
+    for (size_t i = 0; i < m.second_ids.size(); ++i) {
+      if (std::find(m.ids.begin(), m.ids.end(), m.second_ids[i]) != m.ids.end()) continue;
+      m.ids.push_back(m.second_ids[i]);
+      m.corners.push_back(m.second_corners[i]);
+    }
+  }
 
   for (size_t i = 0; i < m.ids.size(); ++i) {
     const int id = m.ids[i];
