@@ -1,5 +1,6 @@
 #include "room_map/depth_check.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "features/marker_pose.h"
@@ -12,6 +13,14 @@ namespace {
 // Ideal pixel -> normalised image coordinates.
 Eigen::Vector2d Normalised(const CameraIntrinsics& K, double u, double v) {
   return Eigen::Vector2d((u - K.cx) / K.fx, (v - K.cy) / K.fy);
+}
+
+// The median of `values` (reordered); 0 when empty.
+double MedianOf(std::vector<double>* values) {
+  if (values->empty()) return 0;
+  const auto mid = values->begin() + values->size() / 2;
+  std::nth_element(values->begin(), mid, values->end());
+  return *mid;
 }
 
 }  // namespace
@@ -72,7 +81,18 @@ DepthCheckResult CheckDepthAgainstColourGeometry(const BaProblem& problem, const
       (gross ? grossly_off : comparisons).push_back(comparison);
     }
   }
-  const bool leave_out_gross = 4 * grossly_off.size() < comparisons.size() + grossly_off.size();
+  // Gross readings kept only when they are most of them, or agree on one
+  // ratio (a wrong depth scale).
+  bool leave_out_gross = 2 * grossly_off.size() < comparisons.size() + grossly_off.size();
+  if (leave_out_gross && !grossly_off.empty()) {
+    std::vector<double> ratio;
+    ratio.reserve(grossly_off.size());
+    for (const DepthComparison& c : grossly_off) ratio.push_back(c.measured_m / c.expected_m);
+    const double median = MedianOf(&ratio);
+    for (double& r : ratio) r = std::abs(r - median);
+    leave_out_gross = !(1.4826 * MedianOf(&ratio) < kDepthCheckScaleSpread * median &&
+                        4 * grossly_off.size() >= comparisons.size() + grossly_off.size());
+  }
   if (!leave_out_gross)
     comparisons.insert(comparisons.end(), grossly_off.begin(), grossly_off.end());
   // The depth on the planes the markers span, from the same depth-free

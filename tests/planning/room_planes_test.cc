@@ -378,8 +378,10 @@ TEST(RoomPlanes, AMarkersCovarianceRelativeToTheOriginIsHonestAndTheSameWhicheve
 // (7-18 mm, against a reading's noise of 3-15 mm) is found and removed
 // (measured: 14.3 mm RMS at the readings' pixels, 3.0 left); the readings of one
 // marker view 50 % off (a marker posed wrongly) are left out and counted;
-// when every reading is that far off (a wrong depth scale) none is left out
-// and the check sees the depth as it is.
+// so are those of a third of the views off both ways (not a scale: what
+// stands in front of a marker or is seen beyond it); when every reading is
+// that far off (a wrong depth scale) none is left out and the check sees the
+// depth as it is.
 TEST(DepthCheck, RemovesADepthScaleErrorAndLeavesOutOnlyAFewGrossReadings) {
   const FloorScene scene;
   const CameraIntrinsics& K = scene.K;
@@ -406,6 +408,9 @@ TEST(DepthCheck, RemovesADepthScaleErrorAndLeavesOutOnlyAFewGrossReadings) {
           const double sigma = 0.001 + 0.0015 * p.z() * p.z();
           double z = p.z() * (1 + scale) + sigma * unit(rng);
           if (static_cast<int>(i) == gross_view || gross_view == -2) z *= gross_factor;
+          // Every third view off, some long and some short (what stands in
+          // front of a marker, or is seen beyond its edge).
+          if (gross_view == -3 && i % 3 == 0) z *= i % 2 == 1 ? gross_factor : 1 / gross_factor;
           const Eigen::Vector2d px = K.Project(p);
           o.depth_samples.push_back({px.cast<float>(), static_cast<float>(z)});
         }
@@ -459,6 +464,15 @@ TEST(DepthCheck, RemovesADepthScaleErrorAndLeavesOutOnlyAFewGrossReadings) {
   EXPECT_NEAR(left_out.fit.correction.ErrorAt1mCentreMm(), found.fit.correction.ErrorAt1mCentreMm(),
               0.5)
       << "the gross readings do not move the correction";
+
+  // A third of the views off every which way: not a scale, left out.
+  const BaProblem third_gross = with_depth(0.006, -3, 1.5, 21);
+  const DepthCheckResult third = CheckDepthAgainstColourGeometry(third_gross, options, input);
+  EXPECT_GT(third.readings_left_out, 0) << third.message;
+  EXPECT_TRUE(third.fit.applied) << third.message;
+  EXPECT_NEAR(third.fit.correction.ErrorAt1mCentreMm(), found.fit.correction.ErrorAt1mCentreMm(),
+              0.5)
+      << third.message;
 
   const BaProblem all_gross = with_depth(0.006, -2, 1.5, 21);
   const DepthCheckResult wrong_scale = CheckDepthAgainstColourGeometry(all_gross, options, input);
