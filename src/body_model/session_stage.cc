@@ -353,6 +353,9 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   // The scan is placed in the room by frames the image localises (equal
   // weights, below): none held by depth and motion alone (2-5 mm).
   localizer_options.depth_held_tracking = false;
+  // Frames placed by a small marker and a few keypoints still help the
+  // scan's placement, a robust mean over many frames (CameraLocalizerOptions).
+  localizer_options.markers_alone_must_hold = false;
   CameraLocalizer localizer(plan.room_map, camera, localizer_options);
   MarkerDetectorOptions detector_options;
   detector_options.dictionary = folder.config.dictionary;

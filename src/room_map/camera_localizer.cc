@@ -735,9 +735,7 @@ struct CameraLocalizer::Impl {
     PoseSigmas(ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()), &out->position_sigma_mm, &out->rotation_sigma_deg);
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     // The markers place the frame only when their corners alone hold the
-    // pose within the limit: a far, small marker (a 22 px origin at 3 m on
-    // a d435 case, its corners alone leaving 50-70 mm) with a handful of
-    // keypoints gave poses 30-160 mm off at a stated 7-17 mm.
+    // pose within the limit (options.markers_alone_must_hold).
     double marker_sigma_mm = std::numeric_limits<double>::infinity();
     if (full >= 1) {
       const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> marker_ldlt(r.marker_information);
@@ -749,7 +747,8 @@ struct CameraLocalizer::Impl {
       }
     }
     out->marker_position_sigma_mm = marker_sigma_mm;
-    const bool markers_hold = marker_sigma_mm <= 1000 * options.max_position_sigma_m;
+    const bool markers_hold =
+        !options.markers_alone_must_hold || marker_sigma_mm <= 1000 * options.max_position_sigma_m;
     const bool by_markers = r.marker_inliers >= options.min_marker_corners && full >= 1 &&
                             r.marker_rms_px <= options.max_marker_rms_px && markers_hold;
     const int min_keypoints = tracking ? options.min_keypoints_tracking : options.min_keypoints;

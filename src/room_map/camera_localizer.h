@@ -21,7 +21,7 @@
 ///     (pose_refiner.h); a second matching pass at the refined pose;
 ///  6. acceptance: enough inliers (a fully seen marker whose corners alone
 ///     hold the pose within max_position_sigma_m, or min_keypoints), RMS
-///     within bounds;
+///     within bounds (markers_alone_must_hold);
 ///  7. while tracking, a frame the map does not place is followed from the
 ///     last frame it did (that frame's keypoints with depth, outside the
 ///     regions that move), its uncertainty carried on; or held by the
@@ -217,6 +217,15 @@ struct CameraLocalizerOptions {
   /// ... and the pose's own 1-sigma position uncertainty (from the
   /// refinement's information matrix, camera axes, largest) below this (m).
   double max_position_sigma_m = 0.02;
+  /// Room markers place a frame by themselves only when their corners alone
+  /// hold the pose within max_position_sigma_m; otherwise the keypoints must
+  /// (min_keypoints). Measured on a d435 case: a 22 px origin marker at 3 m
+  /// (its corners alone 50-110 mm) with 5-19 keypoints gave poses 30-160 mm
+  /// off at a stated 7-17 mm. The session's body scan turns it off: it
+  /// places the scan by a robust mean over many frames, and there such
+  /// frames (2-32 mm off on an xtion case) helped: the scan known to 2.09 mm
+  /// at the stickers from 16 frames with them, 4.54 mm from 3 without.
+  bool markers_alone_must_hold = true;
   /// ... and, for a pose found without a motion prior from keypoints alone
   /// (no fully seen marker), below this: keypoints on a far wall alone
   /// leave the classic sideways-shift / turn ambiguity (measured: 36 cm and

@@ -806,6 +806,11 @@ TEST(Localizer, AMarkerTooWeakToPlaceTheCameraAloneNeedsTheKeypoints) {
   EXPECT_FALSE(refused.ok);
   EXPECT_NE(refused.message.find("too small or far to place the camera alone"), std::string::npos)
       << refused.message;
+  // Unless the caller takes such frames (the session's scan placement).
+  CameraLocalizerOptions taking = strict;
+  taking.markers_alone_must_hold = false;
+  CameraLocalizer taken(GetSmallCaseMap().map, K, taking);
+  EXPECT_TRUE(taken.Localize(frame).ok);
   // With keypoints enough, the same frame is placed by them.
   strict.min_keypoints = strict.min_keypoints_tracking = std::max(6, placed.keypoints_used / 2);
   CameraLocalizer by_keypoints(GetSmallCaseMap().map, K, strict);
