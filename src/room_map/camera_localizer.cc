@@ -47,6 +47,16 @@ void PoseSigmas(const Eigen::Matrix<double, 6, 6>& cov, double* position_mm, dou
   *rotation_deg = DegFromRad(std::sqrt(std::max(0.0, rot.eigenvalues().maxCoeff())));
 }
 
+// The covariance of a pose refinement's `information` (J^T W J), when it is
+// invertible with every direction constrained; nullopt otherwise.
+std::optional<Eigen::Matrix<double, 6, 6>> CovarianceOf(
+    const Eigen::Matrix<double, 6, 6>& information) {
+  const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(information);
+  if (ldlt.info() != Eigen::Success || !(information.diagonal().array() > 0).all())
+    return std::nullopt;
+  return Eigen::Matrix<double, 6, 6>(ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()));
+}
+
 }  // namespace
 
 const char* LocalizationStatusName(LocalizationStatus status) {
@@ -693,11 +703,8 @@ struct CameraLocalizer::Impl {
       Lap(mark, matching_ms);
       BuildCorrespondences();
       if (r.converged) {
-        const Eigen::LDLT<Mat6> ldlt(r.information);
-        Mat6 cov = Mat6::Zero();
-        const bool have = ldlt.info() == Eigen::Success && (r.information.diagonal().array() > 0).all();
-        if (have) cov = ldlt.solve(Mat6::Identity());
-        AddRoomDepths(r.camera_from_room, have && cov.allFinite() ? &cov : nullptr);
+        const std::optional<Mat6> cov = CovarianceOf(r.information);
+        AddRoomDepths(r.camera_from_room, cov && cov->allFinite() ? &*cov : nullptr);
       }
       r = RefineCameraPose(corr, K, r.camera_from_room, options.refiner, prior);
       Lap(mark, refinement_ms);
@@ -730,21 +737,17 @@ struct CameraLocalizer::Impl {
     out->rms_px = r.rms_px;
     out->marker_rms_px = r.marker_rms_px;
     out->keypoint_rms_px = r.keypoint_rms_px;
-    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(r.information);
-    if (ldlt.info() != Eigen::Success || !(r.information.diagonal().array() > 0).all()) return false;
-    PoseSigmas(ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()), &out->position_sigma_mm, &out->rotation_sigma_deg);
+    const std::optional<Mat6> cov = CovarianceOf(r.information);
+    if (!cov) return false;
+    PoseSigmas(*cov, &out->position_sigma_mm, &out->rotation_sigma_deg);
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     // The markers place the frame only when their corners alone hold the
     // pose within the limit (options.markers_alone_must_hold).
     double marker_sigma_mm = std::numeric_limits<double>::infinity();
-    if (full >= 1) {
-      const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> marker_ldlt(r.marker_information);
-      if (marker_ldlt.info() == Eigen::Success &&
-          (r.marker_information.diagonal().array() > 0).all()) {
-        double rotation_deg = 0;
-        PoseSigmas(marker_ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity()), &marker_sigma_mm,
-                   &rotation_deg);
-      }
+    if (const std::optional<Mat6> marker_cov =
+            full >= 1 ? CovarianceOf(r.marker_information) : std::nullopt) {
+      double rotation_deg = 0;
+      PoseSigmas(*marker_cov, &marker_sigma_mm, &rotation_deg);
     }
     out->marker_position_sigma_mm = marker_sigma_mm;
     const bool markers_hold =
@@ -891,10 +894,9 @@ struct CameraLocalizer::Impl {
     // motion prior (which descends from the anchor too).
     const PoseRefinementResult alone = RefineCameraPose(corr, K, r->camera_from_room, options.refiner);
     Lap(mark, &tm->refinement_ms);
-    const Eigen::LDLT<Mat6> ldlt(alone.information);
-    if (!alone.converged || ldlt.info() != Eigen::Success || !(alone.information.diagonal().array() > 0).all()) {
-      return false;
-    }
+    const std::optional<Mat6> alone_cov =
+        alone.converged ? CovarianceOf(alone.information) : std::nullopt;
+    if (!alone_cov) return false;
     // An error exp(d) of the anchor's camera_from_room moves its points, and
     // so this camera, by exp(Ad_M d), M = camera_from_room * anchor^-1.
     const Rigid3d M = r->camera_from_room * anchor.camera_from_room.Inverse();
@@ -903,7 +905,7 @@ struct CameraLocalizer::Impl {
     Ad.topLeftCorner<3, 3>() = R;
     Ad.bottomLeftCorner<3, 3>() = Skew(M.translation) * R;
     Ad.bottomRightCorner<3, 3>() = R;
-    const Mat6 cov = ldlt.solve(Mat6::Identity()) + Ad * anchor.cov * Ad.transpose();
+    const Mat6 cov = *alone_cov + Ad * anchor.cov * Ad.transpose();
     if (!cov.allFinite()) return false;
     out->markers_used = 0;
     out->keypoints_used = r->keypoint_inliers;
