@@ -712,6 +712,43 @@ struct CameraLocalizer::Impl {
     return r;
   }
 
+  // The position sigma (mm) of refinement r once its `k` keypoint inliers
+  // that hold it most are left out, one at a time, each the one whose
+  // leaving out widens it most (infinity when the rest leave a direction
+  // free). From r's information less their shares at r's pose.
+  double SigmaWithoutStrongestKeypoints(const PoseRefinementResult& r, int k) const {
+    Mat6 information = r.information;
+    std::vector<std::pair<size_t, Mat6>> shares;
+    for (size_t i = 0; i < corr.size(); ++i) {
+      if (corr.group[i] != CorrespondenceGroup::kKeypoint || i >= r.inlier.size() || !r.inlier[i])
+        continue;
+      shares.emplace_back(i, PointInformation(corr, i, K, r.camera_from_room, options.refiner));
+    }
+    double sigma_mm = -1, rotation_deg = 0;
+    for (int round = 0; round < k && !shares.empty(); ++round) {
+      size_t strongest = 0;
+      sigma_mm = -1;
+      for (size_t j = 0; j < shares.size(); ++j) {
+        const std::optional<Mat6> cov = CovarianceOf(information - shares[j].second);
+        if (!cov) return std::numeric_limits<double>::infinity();
+        double s_mm = 0;
+        PoseSigmas(*cov, &s_mm, &rotation_deg);
+        if (s_mm > sigma_mm) {
+          sigma_mm = s_mm;
+          strongest = j;
+        }
+      }
+      information -= shares[strongest].second;
+      shares.erase(shares.begin() + static_cast<std::ptrdiff_t>(strongest));
+    }
+    if (sigma_mm < 0) {
+      const std::optional<Mat6> cov = CovarianceOf(information);
+      if (!cov) return std::numeric_limits<double>::infinity();
+      PoseSigmas(*cov, &sigma_mm, &rotation_deg);
+    }
+    return sigma_mm;
+  }
+
   bool Accept(const PoseRefinementResult& r, bool tracking, LocalizationResult* out) const {
     // Markers used: all four corners inliers.
     int full = 0;
@@ -788,15 +825,29 @@ struct CameraLocalizer::Impl {
         return false;
       }
     }
-    // Keypoints alone, without a motion prior: only a well-conditioned pose.
-    if (!tracking && !by_markers && by_keypoints &&
-        !(out->position_sigma_mm <= 1000 * options.max_relocalisation_position_sigma_m)) {
-      std::ostringstream why;
-      why << "keypoints alone, without a motion prior, give a poorly conditioned pose (sigma "
-          << out->position_sigma_mm << " mm, limit " << 1000 * options.max_relocalisation_position_sigma_m
-          << " mm); refused";
-      out->message = why.str();
-      return false;
+    // Keypoints alone, without a motion prior: only a well-conditioned pose,
+    // and one that does not hang on a few of them.
+    if (!tracking && !by_markers && by_keypoints) {
+      const double limit_mm = 1000 * options.max_relocalisation_position_sigma_m;
+      if (!(out->position_sigma_mm <= limit_mm)) {
+        std::ostringstream why;
+        why << "keypoints alone, without a motion prior, give a poorly conditioned pose (sigma "
+            << out->position_sigma_mm << " mm, limit " << limit_mm << " mm); refused";
+        out->message = why.str();
+        return false;
+      }
+      const double without_mm = SigmaWithoutStrongestKeypoints(r, options.relocalisation_leave_out);
+      const double without_limit_mm = 1000 * options.max_position_sigma_m;
+      if (!(without_mm <= without_limit_mm)) {
+        std::ostringstream why;
+        why << std::fixed << std::setprecision(1)
+            << "keypoints alone, without a motion prior, give a pose held by "
+            << options.relocalisation_leave_out << " of its " << r.keypoint_inliers
+            << " keypoints (sigma " << out->position_sigma_mm << " mm, " << without_mm
+            << " mm without them, limit " << without_limit_mm << " mm); refused";
+        out->message = why.str();
+        return false;
+      }
     }
     return by_markers || by_keypoints;
   }

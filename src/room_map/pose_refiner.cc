@@ -81,7 +81,71 @@ inline double TukeyWeight(double r, double c) {
   return w * w;
 }
 
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+
+// One point correspondence's weighted normal-equation terms at its
+// camera-frame point p: reprojection (H_pixel, shared into the markers'
+// information) and depth; used = false when it carries no weight.
+struct PointTerms {
+  Mat6 H_pixel, H_depth;
+  Vec6 g;
+  bool used = false;
+};
+
+inline PointTerms PointTermsAt(const Eigen::Vector3d& p, const PoseCorrespondences& corr, size_t i,
+                               const CameraIntrinsics& K, bool tukey,
+                               const PoseRefinerOptions& options) {
+  PointTerms out;
+  if (p.z() <= 1e-6) return out;
+  const double iz = 1.0 / p.z();
+  const double u = K.fx * p.x() * iz + K.cx, v = K.fy * p.y() * iz + K.cy;
+  const double s = corr.inv_sigma_px[i];
+  const double ru = (u - corr.pixels[i].x()) * s, rv = (v - corr.pixels[i].y()) * s;
+  const double r = std::sqrt(ru * ru + rv * rv);
+  const double w = corr.group[i] == CorrespondenceGroup::kMarker
+                       ? HuberWeight(r, options.marker_huber)
+                   : tukey ? TukeyWeight(r, options.keypoint_tukey)
+                           : HuberWeight(r, options.marker_huber);
+  if (w <= 0) return out;
+  out.used = true;
+  // d(u,v)/dp and dp/d(omega, t) = [-[p]x, I].
+  Eigen::Matrix<double, 2, 3> Jp;
+  Jp << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz;
+  Eigen::Matrix<double, 2, 6> J;
+  J.leftCols<3>() = -Jp * Skew(p);
+  J.rightCols<3>() = Jp;
+  J *= s;
+  out.H_pixel.noalias() = w * J.transpose() * J;
+  out.g.noalias() = w * J.transpose() * Eigen::Vector2d(ru, rv);
+  out.H_depth.setZero();
+  if (corr.inv_sigma_depth[i] > 0) {
+    const double sd = corr.inv_sigma_depth[i];
+    const double rd = (p.z() - corr.depth_m[i]) * sd;
+    const double wd = tukey ? TukeyWeight(std::abs(rd), options.keypoint_tukey)
+                            : HuberWeight(std::abs(rd), options.marker_huber);
+    if (wd > 0) {
+      Vec6 Jd;
+      Jd << p.y(), -p.x(), 0, 0, 0, 1;
+      Jd *= sd;
+      out.H_depth.noalias() = wd * Jd * Jd.transpose();
+      out.g.noalias() += wd * Jd * rd;
+    }
+  }
+  return out;
+}
+
 }  // namespace
+
+Eigen::Matrix<double, 6, 6> PointInformation(const PoseCorrespondences& corr, size_t i,
+                                             const CameraIntrinsics& intrinsics,
+                                             const Rigid3d& camera_from_room,
+                                             const PoseRefinerOptions& options) {
+  const bool tukey = options.max_iterations > options.huber_iterations;
+  const PointTerms terms =
+      PointTermsAt(camera_from_room * corr.points_in_room[i], corr, i, intrinsics, tukey, options);
+  return terms.used ? Mat6(terms.H_pixel + terms.H_depth) : Mat6::Zero();
+}
 
 PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
                                       const CameraIntrinsics& intrinsics,
@@ -100,8 +164,6 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   Eigen::Matrix3d prior_R_inv = Eigen::Matrix3d::Identity();
   if (prior) prior_R_inv = prior->camera_from_room.RotationMatrix().transpose();
 
-  using Mat6 = Eigen::Matrix<double, 6, 6>;
-  using Vec6 = Eigen::Matrix<double, 6, 1>;
   Mat6 H, H_prior = Mat6::Zero(), H_marker = Mat6::Zero();
   Vec6 g;
   for (int it = 0; it < options.max_iterations; ++it) {
@@ -112,45 +174,13 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
     const bool tukey = it >= options.huber_iterations;
     int used = 0;
     for (size_t i = 0; i < n; ++i) {
-      const Eigen::Vector3d p = R * corr.points_in_room[i] + t;
-      if (p.z() <= 1e-6) continue;
-      const double iz = 1.0 / p.z();
-      const double u = fx * p.x() * iz + cx, v = fy * p.y() * iz + cy;
-      const double s = corr.inv_sigma_px[i];
-      const double ru = (u - corr.pixels[i].x()) * s, rv = (v - corr.pixels[i].y()) * s;
-      const double r = std::sqrt(ru * ru + rv * rv);
-      double w;
-      if (corr.group[i] == CorrespondenceGroup::kMarker) {
-        w = HuberWeight(r, options.marker_huber);
-      } else {
-        w = tukey ? TukeyWeight(r, options.keypoint_tukey) : HuberWeight(r, options.marker_huber);
-      }
-      if (w <= 0) continue;
+      const PointTerms terms =
+          PointTermsAt(R * corr.points_in_room[i] + t, corr, i, intrinsics, tukey, options);
+      if (!terms.used) continue;
       ++used;
-      // d(u,v)/dp and dp/d(omega, t) = [-[p]x, I].
-      Eigen::Matrix<double, 2, 3> Jp;
-      Jp << fx * iz, 0, -fx * p.x() * iz * iz, 0, fy * iz, -fy * p.y() * iz * iz;
-      Eigen::Matrix<double, 2, 6> J;
-      J.leftCols<3>() = -Jp * Skew(p);
-      J.rightCols<3>() = Jp;
-      J *= s;
-      H.noalias() += w * J.transpose() * J;
-      if (corr.group[i] == CorrespondenceGroup::kMarker)
-        H_marker.noalias() += w * J.transpose() * J;
-      g.noalias() += w * J.transpose() * Eigen::Vector2d(ru, rv);
-      if (corr.inv_sigma_depth[i] > 0) {
-        const double sd = corr.inv_sigma_depth[i];
-        const double rd = (p.z() - corr.depth_m[i]) * sd;
-        const double wd = tukey ? TukeyWeight(std::abs(rd), options.keypoint_tukey)
-                                : HuberWeight(std::abs(rd), options.marker_huber);
-        if (wd > 0) {
-          Vec6 Jd;
-          Jd << p.y(), -p.x(), 0, 0, 0, 1;
-          Jd *= sd;
-          H.noalias() += wd * Jd * Jd.transpose();
-          g.noalias() += wd * Jd * rd;
-        }
-      }
+      H.noalias() += terms.H_pixel + terms.H_depth;
+      if (corr.group[i] == CorrespondenceGroup::kMarker) H_marker.noalias() += terms.H_pixel;
+      g.noalias() += terms.g;
     }
     // Plane depths: z = (n.q) / (n.r) with n = R n_room, q = R p_room + t;
     // dz/domega = -(n.q) / (n.r)^2 (n x r), dz/dt = n / (n.r).

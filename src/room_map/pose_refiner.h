@@ -112,4 +112,13 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& correspondences
                                       const PoseRefinerOptions& options = {},
                                       const std::optional<PosePrior>& prior = std::nullopt);
 
+/// Correspondence i's share of the information (J^T W J of its reprojection
+/// and depth residuals) at `camera_from_room`, weighted as the refiner's last
+/// iterations weigh it: what leaving it out takes from a result's
+/// `information` (zero when it carries no weight there).
+Eigen::Matrix<double, 6, 6> PointInformation(const PoseCorrespondences& correspondences, size_t i,
+                                             const CameraIntrinsics& intrinsics,
+                                             const Rigid3d& camera_from_room,
+                                             const PoseRefinerOptions& options = {});
+
 }  // namespace arpos
