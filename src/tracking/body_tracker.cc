@@ -377,10 +377,12 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
   MarkerDetectorOptions detector = options_.detector;
   detector.intrinsics = intrinsics;
   detector.keep_unreliable = true;
-  // No second thresholding pass per frame (its +45 % of the detection time
-  // is the 60 fps budget's): stickers too small for the first pass are
-  // searched in upsampled windows where the motion puts them (coarse).
-  detector.second_pass_window_px = 0;
+  // The whole image is searched with the second thresholding pass (it
+  // reads stickers with cells of a few pixels: measured on a d435 case with
+  // 20-25 px ARUCO_ORIGINAL stickers, none of 12 read in the first 15
+  // frames, the patient lost until the camera was placed); tracked frames
+  // search windows where the motion puts the stickers (coarse, upsampled)
+  // and never pay for it.
   m.detector = std::make_unique<MarkerDetector>(detector);
   MarkerDetectorOptions coarse = options_.detector;
   coarse.refinement = CornerRefinementMethod::kOpenCvNone;
