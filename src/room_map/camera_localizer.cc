@@ -105,6 +105,8 @@ std::string CameraLocalizerOptions::Validate() const {
   else if (relocalisation_min_inliers < 4) out << "relocalisation_min_inliers must be at least 4";
   else if (ransac_iterations < 1 || !(ransac_threshold_px > 0)) out << "RANSAC settings must be positive";
   else if (!(max_relocalisation_position_sigma_m > 0)) out << "max_relocalisation_position_sigma_m must be positive";
+  else if (relocalisation_leave_out < 0)
+    out << "relocalisation_leave_out must not be negative";
   else if (relocalisation_surface_points < 1 || !(relocalisation_surface_min_depth_m > 0) ||
            !(relocalisation_surface_gate_m > 0) || relocalisation_surface_min_beyond < 1 ||
            !(relocalisation_surface_max_beyond_fraction > 0 &&

@@ -905,6 +905,9 @@ TEST(Localizer, ARelocalisationHeldByAFewKeypointsIsRefused) {
   const LocalizationResult refused = refusing.Localize(frame);
   EXPECT_FALSE(refused.ok);
   EXPECT_NE(refused.message.find("give a pose held by"), std::string::npos) << refused.message;
+  strict.relocalisation_leave_out = -1;
+  EXPECT_NE(strict.Validate().find("relocalisation_leave_out"), std::string::npos)
+      << strict.Validate();
 }
 
 TEST(Localizer, AcceptsDetectionsFromTheCaller) {
