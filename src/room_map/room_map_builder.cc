@@ -311,7 +311,8 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (!bundle_adjustment.Check(&r)) out << "bundle_adjustment: " << r;
   else if (frame_step < 1) out << "frame_step must be at least 1, got " << frame_step;
   else if (max_frames < 0) out << "max_frames must not be negative";
-  else if (threads < 1) out << "threads must be at least 1";
+  else if (threads < 1 || adjustment_threads < 1)
+    out << "threads must be at least 1";
   else if (!(marker_corner_sigma_px > 0) || !(keypoint_sigma_px > 0)) out << "sigmas must be positive";
   else if (!(marker_reference_cell_px >= 0)) out << "marker_reference_cell_px must not be negative";
   else if (!(max_marker_view_rms_px > 0)) out << "max_marker_view_rms_px must be positive";
@@ -765,7 +766,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     ba.landmarks_in_room.clear();
     ba.keypoint_observations.clear();
     BaOptions marker_ba_options = options.bundle_adjustment;
-    marker_ba_options.threads = options.threads;
+    marker_ba_options.threads = options.adjustment_threads;
     *summary = RunBundleAdjustment(&ba, marker_ba_options);
     for (size_t c = 0; c < camera_frame.size(); ++c) frames[camera_frame[c]].camera_from_room = ba.camera_from_room[c];
   };
@@ -1259,7 +1260,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   ba.landmarks_in_room = landmarks;
   ba.keypoint_observations = keypoint_observations;
   BaOptions joint_options = options.bundle_adjustment;
-  joint_options.threads = options.threads;
+  joint_options.threads = options.adjustment_threads;
   if (options.estimate_depth_correction) {
     // Depth against the colour geometry (depth_check.h): on simulated random
     // conditions, comparing with landmarks instead gave residuals of 2-63
