@@ -720,18 +720,18 @@ struct CameraLocalizer::Impl {
   // free). From r's information less their shares at r's pose.
   double SigmaWithoutStrongestKeypoints(const PoseRefinementResult& r, int k) const {
     Mat6 information = r.information;
-    std::vector<std::pair<size_t, Mat6>> shares;
+    std::vector<Mat6> shares;
     for (size_t i = 0; i < corr.size(); ++i) {
       if (corr.group[i] != CorrespondenceGroup::kKeypoint || i >= r.inlier.size() || !r.inlier[i])
         continue;
-      shares.emplace_back(i, PointInformation(corr, i, K, r.camera_from_room, options.refiner));
+      shares.push_back(PointInformation(corr, i, K, r.camera_from_room, options.refiner));
     }
     double sigma_mm = -1, rotation_deg = 0;
     for (int round = 0; round < k && !shares.empty(); ++round) {
       size_t strongest = 0;
       sigma_mm = -1;
       for (size_t j = 0; j < shares.size(); ++j) {
-        const std::optional<Mat6> cov = CovarianceOf(information - shares[j].second);
+        const std::optional<Mat6> cov = CovarianceOf(information - shares[j]);
         if (!cov) return std::numeric_limits<double>::infinity();
         double s_mm = 0;
         PoseSigmas(*cov, &s_mm, &rotation_deg);
@@ -740,7 +740,7 @@ struct CameraLocalizer::Impl {
           strongest = j;
         }
       }
-      information -= shares[strongest].second;
+      information -= shares[strongest];
       shares.erase(shares.begin() + static_cast<std::ptrdiff_t>(strongest));
     }
     if (sigma_mm < 0) {

@@ -380,9 +380,9 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
   // The whole image is searched with the second thresholding pass (it
   // reads stickers with cells of a few pixels: measured on a d435 case with
   // 20-25 px ARUCO_ORIGINAL stickers, none of 12 read in the first 15
-  // frames, the patient lost until the camera was placed); tracked frames
-  // search windows where the motion puts the stickers (coarse, upsampled)
-  // and never pay for it.
+  // frames, the patient lost until the camera was placed); frames tracked
+  // through windows where the motion puts the stickers (coarse, upsampled)
+  // do not pay for it.
   m.detector = std::make_unique<MarkerDetector>(detector);
   MarkerDetectorOptions coarse = options_.detector;
   coarse.refinement = CornerRefinementMethod::kOpenCvNone;
