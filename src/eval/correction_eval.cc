@@ -1,11 +1,11 @@
 #include "eval/correction_eval.h"
 
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 #include "geometry/so3.h"
 #include "util/check.h"
+#include "util/file.h"
 #include "util/string_util.h"
 
 namespace arpos {
@@ -96,8 +96,7 @@ std::vector<CorrectionRow> ParseCorrectionsCsv(std::istream& in, const std::stri
 }
 
 std::vector<CorrectionRow> ReadCorrectionsCsv(const std::filesystem::path& path) {
-  std::ifstream in(path);
-  if (!in) ARPOS_INPUT_ERROR(path.string() << ": cannot be read");
+  std::istringstream in(ReadTextFile(path));
   return ParseCorrectionsCsv(in, path.string());
 }
 

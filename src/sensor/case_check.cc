@@ -182,14 +182,9 @@ class Checker {
         Error(where, "lists no images");
         lists_ok = false;
       }
-      for (size_t i = 1; i < lists[k].size(); ++i) {
-        if (!(lists[k][i].timestamp_s > lists[k][i - 1].timestamp_s)) {
-          Error(where, StringPrintf("timestamps not increasing at line %d (%.6f after %.6f)",
-                                    lists[k][i].line, lists[k][i].timestamp_s,
-                                    lists[k][i - 1].timestamp_s));
-          lists_ok = false;  // Sequence::Open refuses it too: said once
-          break;
-        }
+      if (const std::string problem = ImageListTimestampProblem(lists[k]); !problem.empty()) {
+        Error(where, problem);
+        lists_ok = false;  // Sequence::Open refuses it too: said once
       }
       int missing = 0;
       for (const auto& entry : lists[k]) {

@@ -27,13 +27,10 @@ Sequence Sequence::OpenImpl(const std::filesystem::path& folder, bool every_colo
   const auto depth = ReadImageList(folder / "depth.txt");
   // Frames are used in list order as time order (tracking, association).
   for (const auto* list : {&rgb, &depth}) {
-    for (size_t i = 1; i < list->size(); ++i) {
-      if (!((*list)[i].timestamp_s > (*list)[i - 1].timestamp_s)) {
-        ARPOS_INPUT_ERROR((folder / (list == &rgb ? "rgb.txt" : "depth.txt")).string()
-                          << ":" << (*list)[i].line << ": timestamps not increasing ("
-                          << StringPrintf("%.6f after %.6f", (*list)[i].timestamp_s, (*list)[i - 1].timestamp_s)
-                          << ")");
-      }
+    const std::string problem = ImageListTimestampProblem(*list);
+    if (!problem.empty()) {
+      ARPOS_INPUT_ERROR((folder / (list == &rgb ? "rgb.txt" : "depth.txt")).string()
+                        << ": " << problem);
     }
   }
   std::vector<double> rgb_t, depth_t;

@@ -58,6 +58,29 @@ std::vector<ImageListEntry> ReadImageList(const std::filesystem::path& path) {
   return entries;
 }
 
+std::string ImageListTimestampProblem(const std::vector<ImageListEntry>& entries) {
+  for (size_t i = 1; i < entries.size(); ++i) {
+    if (!(entries[i].timestamp_s > entries[i - 1].timestamp_s)) {
+      return StringPrintf("timestamps not increasing at line %d (%.6f after %.6f)", entries[i].line,
+                          entries[i].timestamp_s, entries[i - 1].timestamp_s);
+    }
+  }
+  if (entries.size() < 2) return "";
+  std::vector<double> spacing;
+  spacing.reserve(entries.size() - 1);
+  for (size_t i = 1; i < entries.size(); ++i)
+    spacing.push_back(entries[i].timestamp_s - entries[i - 1].timestamp_s);
+  std::nth_element(spacing.begin(), spacing.begin() + spacing.size() / 2, spacing.end());
+  const double median = spacing[spacing.size() / 2];
+  if (!(median > kMaxMedianFrameSpacingS)) return "";
+  // At 5-100 frames a second, seconds times 1e3, 1e6 or 1e9.
+  const char* unit = median < 1e4 ? "milliseconds" : median < 1e7 ? "microseconds" : "nanoseconds";
+  return StringPrintf(
+      "frames are a median %.6g s apart: timestamps must be in seconds (DATASET.md); these look "
+      "like %s",
+      median, unit);
+}
+
 void WriteImageList(const std::filesystem::path& path, const std::vector<ImageListEntry>& entries,
                     const std::string& header_comment) {
   std::ostringstream out;

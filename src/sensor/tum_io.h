@@ -23,6 +23,20 @@ std::vector<ImageListEntry> ReadImageList(const std::filesystem::path& path);
 void WriteImageList(const std::filesystem::path& path, const std::vector<ImageListEntry>& entries,
                     const std::string& header_comment);
 
+/// Frames of a recording further apart than this (median) are not a video
+/// with timestamps in seconds (DATASET.md): a list in milliseconds or
+/// nanoseconds reads as frames minutes to years apart, and every window
+/// counted in seconds (colour-depth association, carried poses, the patient
+/// jump check) would silently stop working.
+constexpr double kMaxMedianFrameSpacingS = 10.0;
+
+/// What is wrong with an image list's timestamps as frame times, "" when
+/// nothing: not strictly increasing in list order (frames are used in list
+/// order as time order; names the line), or a median spacing beyond
+/// kMaxMedianFrameSpacingS (says which unit they look like). The one rule
+/// for `arpos check` and every stage that opens a sequence.
+std::string ImageListTimestampProblem(const std::vector<ImageListEntry>& entries);
+
 /// One pose of a TUM trajectory: `room_from_x` maps the moving frame x into the room.
 struct StampedPose {
   double timestamp_s = 0;

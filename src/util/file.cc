@@ -19,7 +19,9 @@ std::string ReadTextFile(const fs::path& path) {
   std::ostringstream buffer;
   buffer << in.rdbuf();
   if (in.bad()) ARPOS_INPUT_ERROR(path.string() << ": read error");
-  return buffer.str();
+  std::string text = buffer.str();
+  if (text.rfind("\xEF\xBB\xBF", 0) == 0) text.erase(0, 3);
+  return text;
 }
 
 void WriteFileAtomic(const fs::path& path, const std::string& contents) {

@@ -8,7 +8,10 @@ namespace arpos {
 
 namespace fs = std::filesystem;
 
-/// Reads a whole file; throws InputError naming the file if it cannot.
+/// Reads a whole file; throws InputError naming the file if it cannot. A
+/// leading UTF-8 byte-order mark (what many Windows editors and .NET tools
+/// write first) is dropped: it is invisible, and a parser would read it as
+/// part of the first token.
 std::string ReadTextFile(const fs::path& path);
 
 /// Writes through a temporary file in the same folder, flushed to disk, then

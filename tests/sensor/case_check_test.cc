@@ -9,6 +9,7 @@
 #include "sensor/case_folder.h"
 #include "sensor/sequence.h"
 #include "sensor/test_case_builder.h"
+#include "sensor/tum_io.h"
 #include "util/check.h"
 #include "util/file.h"
 
@@ -85,6 +86,36 @@ TEST_F(CaseCheckTest, NonMonotonicTimestamps) {
   WriteFileAtomic(root() / "room" / "rgb.txt",
                   "# t file\n1.0 rgb/0.png\n1.066667 rgb/2.png\n1.033333 rgb/1.png\n");
   ExpectError("room/rgb.txt", "timestamps not increasing at line 4");
+}
+
+// Timestamps in another unit than seconds (a converter that wrote
+// nanoseconds) read as frames years apart; every window counted in seconds
+// would stop working without a word. Refused by the check and the reader.
+TEST_F(CaseCheckTest, TimestampsThatAreNotSecondsAreNamedWithTheirLikelyUnit) {
+  WriteFileAtomic(root() / "room" / "rgb.txt",
+                  "1700000001000000000 rgb/0.png\n1700000001033333333 "
+                  "rgb/1.png\n1700000001066666667 rgb/2.png\n");
+  ExpectError("room/rgb.txt",
+              "timestamps must be in seconds (DATASET.md); these look like nanoseconds");
+  try {
+    Sequence::Open(root() / "room");
+    ADD_FAILURE() << "nanosecond timestamps were read as seconds";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("room/rgb.txt: frames are a median"), std::string::npos)
+        << e.what();
+  }
+  WriteFileAtomic(root() / "room" / "rgb.txt", "1000 rgb/0.png\n1033 rgb/1.png\n1067 rgb/2.png\n");
+  ExpectError("room/rgb.txt", "these look like milliseconds");
+}
+
+// Frames a second apart (a slow recording, or stills) are still seconds.
+TEST(ImageListTimestamps, FramesASecondApartAreSeconds) {
+  std::vector<ImageListEntry> list;
+  for (int i = 0; i < 5; ++i)
+    list.push_back({10.0 + i, "rgb/" + std::to_string(i) + ".png", i + 1});
+  EXPECT_EQ(ImageListTimestampProblem(list), "");
+  list.resize(1);
+  EXPECT_EQ(ImageListTimestampProblem(list), "");
 }
 
 TEST_F(CaseCheckTest, TargetPoseNotRigid) {
@@ -191,8 +222,10 @@ TEST_F(CaseCheckTest, OutOfOrderTimestampsAreRefusedByTheSequenceReaderToo) {
     Sequence::Open(root() / "body_scan");
     ADD_FAILURE() << "out-of-order timestamps were read";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("body_scan/depth.txt:3: timestamps not increasing (1.033333 after 1.066667)"),
-              std::string::npos)
+    EXPECT_NE(
+        std::string(e.what()).find(
+            "body_scan/depth.txt: timestamps not increasing at line 3 (1.033333 after 1.066667)"),
+        std::string::npos)
         << e.what();
   }
 }

@@ -47,6 +47,27 @@ TEST(TumIo, MalformedLinesNameFileAndLine) {
   EXPECT_THROW(ReadMatrix4(dir.path() / "m.txt"), InputError);
 }
 
+// Files written on Windows: a UTF-8 byte-order mark first (Notepad, .NET
+// writers) and CRLF line ends. The mark used to be read into the first
+// token ("'\xEF\xBB\xBF#' is not a number", the mark invisible in the message).
+TEST(TumIo, FilesWithAByteOrderMarkAndCrlfLineEndsReadAsWithout) {
+  TempDir dir;
+  const std::string bom = "\xEF\xBB\xBF";
+  WriteFileAtomic(dir.path() / "m.txt",
+                  bom + "# target\r\n1 0 0 0.5\r\n0 1 0 0\r\n0 0 1 0\r\n0 0 0 1\r\n");
+  EXPECT_DOUBLE_EQ(ReadMatrix4(dir.path() / "m.txt")(0, 3), 0.5);
+  WriteFileAtomic(dir.path() / "rgb.txt", bom + "1.0 rgb/a.png\r\n2.0 rgb/b.png\r\n");
+  const std::vector<ImageListEntry> list = ReadImageList(dir.path() / "rgb.txt");
+  ASSERT_EQ(list.size(), 2u);
+  EXPECT_DOUBLE_EQ(list[0].timestamp_s, 1.0);
+  EXPECT_EQ(list[1].relative_path, "rgb/b.png");
+  WriteFileAtomic(dir.path() / "t.txt", bom + "1.0 0 0 0 0 0 0 1\r\n");
+  ASSERT_EQ(ReadTrajectory(dir.path() / "t.txt").size(), 1u);
+  // Only a leading mark is dropped.
+  WriteFileAtomic(dir.path() / "late.txt", "1.0 rgb/a.png\n" + bom + "2.0 rgb/b.png\n");
+  EXPECT_THROW(ReadImageList(dir.path() / "late.txt"), InputError);
+}
+
 // A NaN in a pose line used to be reported as "expected 8 numbers", as if
 // the line were short.
 TEST(TumIo, ANonFiniteValueIsNamedWithFileLineAndField) {
