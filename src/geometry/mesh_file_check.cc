@@ -15,6 +15,19 @@
 
 namespace arpos {
 namespace fs = std::filesystem;
+
+size_t TextMeshStart(const std::string& data) {
+  static const std::string kBom = "\xEF\xBB\xBF";
+  if (data.compare(0, kBom.size(), kBom) != 0) return 0;
+  // Only before a text format's keyword: a binary STL's 80-byte header is
+  // free text and may begin with anything.
+  for (const char* keyword :
+       {"ply", "OFF", "COFF", "NOFF", "solid", "v ", "#", "o ", "g ", "mtllib", "\n", "\r\n"}) {
+    if (data.compare(kBom.size(), std::strlen(keyword), keyword) == 0) return kBom.size();
+  }
+  return 0;
+}
+
 namespace {
 
 std::string ReadAll(const fs::path& path) {
@@ -22,7 +35,10 @@ std::string ReadAll(const fs::path& path) {
   if (!in) ARPOS_INPUT_ERROR(path.string() << ": cannot open mesh file");
   std::ostringstream buffer;
   buffer << in.rdbuf();
-  return buffer.str();
+  std::string data = buffer.str();
+  const size_t text = TextMeshStart(data);
+  if (text > 0) data.erase(0, text);
+  return data;
 }
 
 // ---------------------------------------------------------------- PLY

@@ -12,8 +12,10 @@
 /// refused with a clear message instead. Other extensions pass unchecked (assimp's OBJ and STL
 /// readers refuse those cases themselves).
 
+#include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -25,6 +27,11 @@ namespace arpos {
 /// shorter than declared, face indices out of range, non-numbers, NaN or
 /// infinite values. Returns silently for a sound file or another extension.
 void CheckMeshFileStructure(const std::filesystem::path& path);
+
+/// Where a text mesh file's content starts: 3 after a UTF-8 byte-order mark
+/// followed by a text format's first keyword (what Windows tools write
+/// first; readers take it for part of the first line), else 0.
+size_t TextMeshStart(const std::string& data);
 
 /// What a PLY file holds, in file units.
 struct PlyContents {

@@ -4,10 +4,14 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <algorithm>
 #include <assimp/Importer.hpp>
 #include <cstdint>
 #include <cstring>
+#include <fstream>
 #include <map>
+#include <sstream>
+#include <string>
 #include <system_error>
 #include <tuple>
 
@@ -124,7 +128,24 @@ TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadO
   importer.SetPropertyInteger(AI_CONFIG_PP_RVC_FLAGS, removed);
   const unsigned flags =
       aiProcess_RemoveComponent | aiProcess_Triangulate | aiProcess_JoinIdenticalVertices;
-  const aiScene* scene = importer.ReadFile(path.string(), flags);
+  const aiScene* scene = nullptr;
+  {
+    std::ifstream in(path, std::ios::binary);
+    std::string head(8, '\0');
+    in.read(head.data(), static_cast<std::streamsize>(head.size()));
+    head.resize(static_cast<size_t>(std::max<std::streamsize>(0, in.gcount())));
+    if (TextMeshStart(head) > 0) {
+      // assimp reads a byte-order mark into the first line (an OBJ's first
+      // vertex lost, "vertex index out of range"): read without it.
+      std::ostringstream buffer;
+      buffer << in.rdbuf();
+      const std::string data = head.substr(TextMeshStart(head)) + buffer.str();
+      const std::string hint = ToLower(path.extension().string()).substr(1);
+      scene = importer.ReadFileFromMemory(data.data(), data.size(), flags, hint.c_str());
+    } else {
+      scene = importer.ReadFile(path.string(), flags);
+    }
+  }
   if (scene == nullptr || scene->mRootNode == nullptr) {
     ARPOS_INPUT_ERROR(path.string() << ": cannot read mesh: " << importer.GetErrorString());
   }

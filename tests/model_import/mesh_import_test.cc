@@ -133,6 +133,37 @@ TEST(MeshImport, FormatsObjStlOff) {
   }
 }
 
+// Text meshes written by Windows tools may begin with a UTF-8 byte-order
+// mark. assimp read it into the first line: an OBJ lost its first vertex
+// ("vertex index out of range"), an ASCII PLY had "no 'ply' magic".
+TEST(MeshImport, TextMeshesWithAByteOrderMarkReadAsWithout) {
+  TempDir dir;
+  const TriangleMesh torso_mm = Scaled(Torso(), 1000.0);
+  test::WriteAsciiObj(torso_mm, dir.path() / "t.obj");
+  test::WriteAsciiStl(torso_mm, dir.path() / "t.stl");
+  test::WriteAsciiOff(torso_mm, dir.path() / "t.off");
+  std::string ply = "ply\nformat ascii 1.0\nelement vertex " +
+                    std::to_string(torso_mm.vertices.size()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                    std::to_string(torso_mm.faces.size()) +
+                    "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (const auto& v : torso_mm.vertices)
+    ply += std::to_string(v.x()) + " " + std::to_string(v.y()) + " " + std::to_string(v.z()) + "\n";
+  for (const auto& f : torso_mm.faces)
+    ply += "3 " + std::to_string(f[0]) + " " + std::to_string(f[1]) + " " + std::to_string(f[2]) +
+           "\n";
+  test::WriteBytes(dir.path() / "t.ply", ply);
+  for (const char* name : {"t.obj", "t.stl", "t.off", "t.ply"}) {
+    const ModelImportResult plain = ImportModel(dir.path() / name, {});
+    const fs::path marked = dir.path() / (std::string("bom_") + name);
+    test::WriteBytes(marked, "\xEF\xBB\xBF" + test::ReadBytes(dir.path() / name));
+    const ModelImportResult with_mark = ImportModel(marked, {});
+    EXPECT_EQ(with_mark.mesh.vertices.size(), plain.mesh.vertices.size()) << name;
+    EXPECT_EQ(with_mark.mesh.faces.size(), plain.mesh.faces.size()) << name;
+    EXPECT_NEAR(ExtentM(with_mark.mesh).z(), 1.6, 1e-3) << name;
+  }
+}
+
 TEST(MeshImport, InwardFacesOfAClosedMeshAreReversed) {
   TempDir dir;
   TriangleMesh inward = Torso();
