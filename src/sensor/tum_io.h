@@ -24,11 +24,13 @@ void WriteImageList(const std::filesystem::path& path, const std::vector<ImageLi
                     const std::string& header_comment);
 
 /// Frames of a recording further apart than this (median) are not a video
-/// with timestamps in seconds (DATASET.md): a list in milliseconds or
-/// nanoseconds reads as frames minutes to years apart, and every window
+/// with timestamps in seconds (DATASET.md): a list in microseconds or
+/// nanoseconds reads as frames hours to years apart, and every window
 /// counted in seconds (colour-depth association, carried poses, the patient
-/// jump check) would silently stop working.
-constexpr double kMaxMedianFrameSpacingS = 10.0;
+/// jump check) would silently stop working. Stills of a walk can be tens of
+/// seconds apart (a few frames of a 30 s room recording), so milliseconds
+/// at video rate (33 "s" apart) cannot be told from them and pass.
+constexpr double kMaxMedianFrameSpacingS = 100.0;
 
 /// What is wrong with an image list's timestamps as frame times, "" when
 /// nothing: not strictly increasing in list order (frames are used in list
