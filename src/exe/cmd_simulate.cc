@@ -51,6 +51,9 @@ const char kUsage[] =
     "  --depth-field-mm A          smooth depth error field over the image, A mm at 1 m\n"
     "                              (growing with depth squared)\n"
     "  --flying-pixels             depths between the two surfaces at depth edges\n"
+    "  --depth-delay-ms MS         each depth image captured MS after its colour image\n"
+    "                              (a camera without colour-depth sync; within +-15), listed\n"
+    "                              in depth.txt at its own timestamp\n"
     "  --distortion K1,K2,P1,P2,K3  lens distortion of the colour camera (OpenCV model; the\n"
     "                              depth is registered to it), e.g. a Kinect's\n"
     "                              0.26,-0.95,-0.005,0.003,1.16; written to case.yaml\n"
@@ -103,9 +106,10 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
       }
     }
     const Args args(argv,
-                    {"profile", "seed", "frames", "tracking-sequences", "room-walk", "room-texture", "body-mesh",
-                     "png-compression", "supersampling", "response", "depth-scale-error",
-                     "depth-field-mm", "breathing-mm", "distortion", "dictionary", "sticker-size-m", "sharpen"},
+                    {"profile", "seed", "frames", "tracking-sequences", "room-walk", "room-texture",
+                     "body-mesh", "png-compression", "supersampling", "response",
+                     "depth-scale-error", "depth-field-mm", "breathing-mm", "distortion",
+                     "dictionary", "sticker-size-m", "sharpen", "depth-delay-ms"},
                     {"hard", "no-noise", "auto-exposure", "flying-pixels", "random-conditions"});
     if (args.positional().size() != 1) {
       std::cerr << "simulate: expected one OUT_DIR\n" << kUsage;
@@ -132,6 +136,8 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
     if (args.Has("flying-pixels")) options.flying_pixels = true;
     if (args.Has("breathing-mm")) options.breathing_mm = args.GetDouble("breathing-mm", 0);
     if (args.Has("sharpen")) options.sharpen_amount = args.GetDouble("sharpen", 0);
+    if (args.Has("depth-delay-ms"))
+      options.depth_delay_s = args.GetDouble("depth-delay-ms", 0) / 1000;
     if (auto d = args.Get("distortion")) {
       std::string spaced = *d;
       std::replace(spaced.begin(), spaced.end(), ',', ' ');

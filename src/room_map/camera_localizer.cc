@@ -19,6 +19,7 @@
 #include "geometry/so3.h"
 #include "room_map/bundle_adjustment.h"
 #include "room_map/room_planes.h"
+#include "sensor/depth_timing.h"
 #include "util/check.h"
 #include "util/string_util.h"
 
@@ -169,6 +170,9 @@ struct CameraLocalizer::Impl {
   // The landmarks a body scan placed (RoomMap::scan_landmarks) are matched
   // only while this is set: for frames the room map alone does not place.
   bool use_scan = false;
+  // What this frame's depth is worth less for being of another instant
+  // than its colour (sensor/depth_timing.h).
+  DelayedDepthSigma delayed;
 
   // Motion model.
   using Mat6 = Eigen::Matrix<double, 6, 6>;
@@ -368,7 +372,8 @@ struct CameraLocalizer::Impl {
   }
 
   double DepthSigma(double z) const {
-    return options.depth_sigma_const_m + options.depth_sigma_quad_per_m * z * z;
+    const double sensor = options.depth_sigma_const_m + options.depth_sigma_quad_per_m * z * z;
+    return delayed.any() ? std::hypot(sensor, delayed.At(z)) : sensor;
   }
 
   std::vector<Eigen::Vector2d> Ideal(const std::vector<Eigen::Vector2d>& px) const {
@@ -578,8 +583,11 @@ struct CameraLocalizer::Impl {
       const double n = static_cast<double>(marker_depth[m].size());
       const double share = std::sqrt(std::max(1.0, n / options.marker_depth_max_effective));
       for (const auto& sample : marker_depth[m]) {
-        const double sigma = options.marker_depth_sigma_const_m +
-                             options.marker_depth_sigma_quad_per_m * sample.depth_m * sample.depth_m;
+        const double sensor =
+            options.marker_depth_sigma_const_m +
+            options.marker_depth_sigma_quad_per_m * sample.depth_m * sample.depth_m;
+        const double sigma =
+            delayed.any() ? std::hypot(sensor, delayed.At(sample.depth_m)) : sensor;
         corr.AddPlaneDepth(entry->room_from_marker.translation, normal,
                            Eigen::Vector2d((sample.pixel.x() - K.cx) / K.fx, (sample.pixel.y() - K.cy) / K.fy),
                            sample.depth_m, sigma * share);
@@ -1035,6 +1043,18 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     m.gray = frame.color;
   }
   const std::optional<Rigid3d> predicted = m.Predict(frame.timestamp_s);
+  {
+    // The camera's speed and turn rate from its last two poses, else the
+    // assumed hand-held motion.
+    std::optional<Rigid3d> step;
+    double step_s = 0;
+    if (m.have_last && m.have_prev && m.last_t > m.prev_t && frame.timestamp_s - m.last_t < 0.5) {
+      step = m.last_camera_from_room * m.prev_camera_from_room.Inverse();
+      step_s = m.last_t - m.prev_t;
+    }
+    m.delayed = DelayedDepthSigmaOf(frame.depth.empty() ? 0.0 : frame.depth_delay_s,
+                                    step ? &*step : nullptr, step_s);
+  }
   const std::optional<Rigid3d> search_start = m.search_start;  // this frame's only
   m.search_start.reset();
   // Keypoints. Without a prediction the whole image is searched for markers

@@ -22,6 +22,9 @@ constexpr double kMaxRoomDistanceM = 20.0;
 /// tall body with arms raised), metres.
 constexpr double kMinReferenceModelExtentM = 0.05;
 constexpr double kMaxReferenceModelExtentM = 3.0;
+/// Depth images listed further than this (median) from their colour images
+/// were taken at other instants (no colour-depth sync): a warning.
+constexpr double kDepthDelayWarningS = 0.002;
 
 struct CaseProblem {
   enum class Severity { kWarning, kError };
@@ -55,7 +58,9 @@ struct CaseCheckReport {
 /// Checks everything (or what `options` selects): case.yaml keys and ranges,
 /// reference model presence, readability, finite vertices and body size,
 /// target_pose.txt rigidity and distance, every sequence's lists (format,
-/// increasing timestamps, files present, colour/depth association), images
+/// increasing timestamps, files present, colour/depth association, depth
+/// taken at other instants than its colour: a warning beyond
+/// kDepthDelayWarningS), images
 /// (readable, 8-bit colour / 16-bit depth, size = camera width x height) and
 /// ground-truth files (format, increasing timestamps, poses in the room).
 /// Never throws for bad input: every defect is a problem.

@@ -15,6 +15,10 @@ struct RgbdFrame {
   double timestamp_s = 0;    ///< colour timestamp
   cv::Mat color;             ///< CV_8UC3, BGR
   cv::Mat depth;             ///< CV_16UC1, registered to colour, 0 = no reading
+  /// When the depth was captured after the colour (its depth.txt timestamp
+  /// minus timestamp_s; a camera without colour-depth sync): 0 when the same
+  /// instant or not known.
+  double depth_delay_s = 0;
   double depth_scale = 1000; ///< depth units per metre
   /// What is wrong with this frame, empty when it is whole: colour that
   /// could not be read (then `color` is empty), depth missing or unreadable

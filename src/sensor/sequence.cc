@@ -44,11 +44,18 @@ Sequence Sequence::OpenImpl(const std::filesystem::path& folder, bool every_colo
   }
   if (every_colour_frame) {
     std::vector<std::string> partner(rgb.size());
-    for (const auto& [i, j] : pairs) partner[i] = depth[j].relative_path;
-    for (size_t i = 0; i < rgb.size(); ++i) seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, partner[i]});
+    std::vector<double> delay(rgb.size(), 0.0);
+    for (const auto& [i, j] : pairs) {
+      partner[i] = depth[j].relative_path;
+      delay[i] = depth[j].timestamp_s - rgb[i].timestamp_s;
+    }
+    for (size_t i = 0; i < rgb.size(); ++i) {
+      seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, partner[i], delay[i]});
+    }
   } else {
     for (const auto& [i, j] : pairs) {
-      seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, depth[j].relative_path});
+      seq.frames_.push_back({rgb[i].timestamp_s, rgb[i].relative_path, depth[j].relative_path,
+                             depth[j].timestamp_s - rgb[i].timestamp_s});
     }
   }
   seq.unmatched_color_ = rgb.size() - pairs.size();
@@ -123,6 +130,7 @@ RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intri
     *depth_problem = "no depth image within " + StringPrintf("%.3f", kFrameAssociationS) + " s in depth.txt";
   } else {
     frame.depth = ReadDepth(depth_path(i), intrinsics, depth_problem);
+    if (!frame.depth.empty()) frame.depth_delay_s = frames_[i].depth_delay_s;
   }
   return frame;
 }

@@ -34,6 +34,8 @@ class Sequence {
   std::filesystem::path color_path(size_t i) const { return folder_ / frames_[i].color; }
   std::filesystem::path depth_path(size_t i) const { return folder_ / frames_[i].depth; }
   bool has_depth(size_t i) const { return !frames_[i].depth.empty(); }
+  /// Frame i's depth timestamp minus its colour timestamp (0 without depth).
+  double depth_delay_s(size_t i) const { return frames_[i].depth_delay_s; }
   /// Colour entries that found no depth partner within kFrameAssociationS.
   size_t unmatched_color() const { return unmatched_color_; }
 
@@ -58,6 +60,7 @@ class Sequence {
   struct FramePaths {
     double timestamp_s;
     std::string color, depth;
+    double depth_delay_s = 0;
   };
   std::filesystem::path folder_;
   std::vector<FramePaths> frames_;

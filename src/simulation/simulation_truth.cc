@@ -195,6 +195,7 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
         << "  field_seed: " << t.depth_field_seed << "\n"
         << "  flying_pixels: " << (t.flying_pixels ? "true" : "false") << "\n";
   }
+  if (t.depth_delay_s != 0) out << "depth_timing:\n  delay_s: " << Num(t.depth_delay_s) << "\n";
   if (t.breathing_amplitude_mm > 0) {
     out << "breathing:\n"
         << "  amplitude_mm: " << Num(t.breathing_amplitude_mm) << "\n"
@@ -316,6 +317,9 @@ SimulationTruth LoadSimulationTruth(const std::filesystem::path& path) {
     t.depth_field_mm_at_1m = r.As<double>(r.Need(db, "field_mm_at_1m", w), w + "field_mm_at_1m");
     t.depth_field_seed = r.As<uint64_t>(r.Need(db, "field_seed", w), w + "field_seed");
     t.flying_pixels = r.As<bool>(r.Need(db, "flying_pixels", w), w + "flying_pixels");
+  }
+  if (const YAML::Node dt = root["depth_timing"]) {
+    t.depth_delay_s = r.As<double>(r.Need(dt, "delay_s", "depth_timing."), "depth_timing.delay_s");
   }
   if (const YAML::Node b = root["breathing"]) {
     const std::string w = "breathing.";

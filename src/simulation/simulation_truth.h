@@ -57,20 +57,26 @@
 /// camera_response:               # colour camera (camera_response.h)
 ///   response: linear             # srgb | linear | gamma2.6 | scurve
 ///   auto_exposure: true
-///   exposure_waves: [[f_hz, phase_rad, weight_stops], ...]  # stops(t) = sum w sin(2 pi f t + phase), t = timestamp
-///   sharpen_amount: 1.0          # unsharp mask of the encoded codes, Gaussian 1 px (sensor_model.h)
-/// depth_bias:                    # z' = z (1 + scale_error) + field_mm_at_1m / 1000 z^2 F(u, v) (sensor_model.h)
+///   exposure_waves: [[f_hz, phase_rad, weight_stops], ...]  # stops(t) = sum w sin(2 pi f t +
+///   phase), t = timestamp sharpen_amount: 1.0          # unsharp mask of the encoded codes,
+///   Gaussian 1 px (sensor_model.h)
+/// depth_bias:                    # z' = z (1 + scale_error) + field_mm_at_1m / 1000 z^2 F(u, v)
+/// (sensor_model.h)
 ///   scale_error: 0.003
 ///   field_mm_at_1m: 2.5
 ///   field_seed: 1234             # F = MakeDepthErrorField(width, height, field_seed)
 ///   flying_pixels: true
-/// breathing:                     # anterior torso (simulator.h); body_groundtruth is the rigid part
+/// depth_timing:                  # depth captured after the colour (no hardware sync)
+///   delay_s: 0.010               # each depth.txt timestamp = its colour's + delay_s
+/// breathing:                     # anterior torso (simulator.h); body_groundtruth is the rigid
+/// part
 ///   amplitude_mm: 4.5            # peak to peak
 ///   period_s: 3.8
 ///   phase_rad: 1.1               # displacement = amplitude w(p) cos^4(pi t / period + phase)
 ///   sticker_weights: {137: 0.98, 150: 0}   # w at each sticker's centre
-/// world_from_room: [16 numbers]  # only when the origin marker was moved (world = layout frame, world.h)
-/// conditions:                    # only with --random-conditions: what was drawn (flat, one per line)
+/// world_from_room: [16 numbers]  # only when the origin marker was moved (world = layout frame,
+/// world.h) conditions:                    # only with --random-conditions: what was drawn (flat,
+/// one per line)
 ///   origin_placement: wall       # floor_near_couch | floor_far | wall
 ///   origin_surface: wall_left
 ///   origin_visibility: poor      # good | medium | poor (the drawn views)
@@ -146,6 +152,7 @@ struct SimulationTruth {
   double depth_field_mm_at_1m = 0;
   uint64_t depth_field_seed = 0;
   bool flying_pixels = false;
+  double depth_delay_s = 0;  ///< depth captured this long after the colour (absent: 0)
   // Breathing (absent: none).
   double breathing_amplitude_mm = 0, breathing_period_s = 0, breathing_phase_rad = 0;
   std::vector<std::pair<int, double>> sticker_breathing_weights;  ///< marker id, weight

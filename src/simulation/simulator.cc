@@ -117,6 +117,8 @@ std::string SimulationOptions::Check() const {
   }
   if (breathing_mm && !(*breathing_mm >= 0 && *breathing_mm <= 30)) return "breathing-mm: must be 0..30";
   if (!(sharpen_amount >= 0 && sharpen_amount <= 3)) return "sharpen: must be 0..3";
+  // Within the colour-depth association window (sensor/sequence.h: 0.02 s).
+  if (!(std::abs(depth_delay_s) <= 0.015)) return "depth-delay-ms: must be within +-15 ms";
   if (const int id = ArucoDictionaryId(dictionary); id < 0) {
     return "dictionary: unknown ArUco dictionary '" + dictionary + "'";
   } else if (cv::aruco::getPredefinedDictionary(id)->bytesList.rows < 200) {
@@ -790,6 +792,16 @@ SimulatedFrame Simulator::RenderFrame(int sequence, int frame) const {
                              static_cast<uint64_t>(frame));
   SimulatedFrame out = RenderScene(scene, options_.noise, key, &scene_at);
   out.timestamp_s = s.timestamp(frame);
+  out.depth_timestamp_s = out.timestamp_s;
+  if (options_.depth_delay_s != 0) {
+    // The depth sensor's exposure at its own time: the scene rendered again
+    // there (camera, patient, breathing), its depth kept.
+    const Scene later = SceneAt(sequence, frame, options_.depth_delay_s);
+    const uint64_t depth_key = Hash3(key, 0x64657074ULL, 1);
+    SimulatedFrame depth_frame = RenderScene(later, options_.noise, depth_key, nullptr);
+    out.depth = depth_frame.depth;
+    out.depth_timestamp_s = out.timestamp_s + options_.depth_delay_s;
+  }
   return ToRoomFrame(std::move(out));
 }
 
@@ -864,6 +876,7 @@ SimulationTruth Simulator::Truth() const {
   t.response = ResponseName(response_);
   t.auto_exposure = auto_exposure_.enabled();
   t.sharpen_amount = options_.sharpen_amount;
+  t.depth_delay_s = options_.depth_delay_s;
   for (const auto& w : auto_exposure_.waves) {
     t.exposure_waves.push_back({w.frequency_hz, w.phase_rad, w.weight_stops});
   }
@@ -999,9 +1012,11 @@ SimulationReport Simulator::WriteCase(const std::filesystem::path& out_dir,
       SimulatedFrame frame = RenderFrame(static_cast<int>(q), f);
       report.render_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
       const std::string stamp = StringPrintf("%.6f", frame.timestamp_s);
-      const std::string rgb_name = "rgb/" + stamp + ".png", depth_name = "depth/" + stamp + ".png";
+      const std::string rgb_name = "rgb/" + stamp + ".png",
+                        depth_name =
+                            "depth/" + StringPrintf("%.6f", frame.depth_timestamp_s) + ".png";
       rgb.push_back({frame.timestamp_s, rgb_name, 0});
-      depth.push_back({frame.timestamp_s, depth_name, 0});
+      depth.push_back({frame.depth_timestamp_s, depth_name, 0});
       camera_poses.push_back({frame.timestamp_s, frame.room_from_camera});
       if (frame.room_from_model) body_poses.push_back({frame.timestamp_s, *frame.room_from_model});
       finish_pending();

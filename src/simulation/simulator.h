@@ -89,6 +89,11 @@ struct SimulationOptions {
   /// The camera's own sharpening of the encoded image (unsharp mask amount,
   /// Gaussian sigma 1 px; 0 = none), as consumer colour cameras do.
   double sharpen_amount = 0;
+  /// Depth captured this long after the colour (s; negative: before), as a
+  /// camera without hardware sync between its colour and depth sensors
+  /// records: each depth image rendered at its own time and listed in
+  /// depth.txt with its own timestamp (0: the same instant).
+  double depth_delay_s = 0;
   /// Lens distortion of the colour camera (OpenCV k1 k2 p1 p2 k3; the depth
   /// is registered to it): the frames are rendered through it and case.yaml
   /// lists it. Must be invertible over the image.
@@ -144,7 +149,8 @@ struct SequencePlan {
 };
 
 struct SimulatedFrame {
-  double timestamp_s = 0;
+  double timestamp_s = 0;        ///< colour
+  double depth_timestamp_s = 0;  ///< timestamp_s + SimulationOptions::depth_delay_s
   Rigid3d room_from_camera;
   std::optional<Rigid3d> room_from_model;  ///< set when the patient is present
   cv::Mat color;   ///< CV_8UC3 BGR as written

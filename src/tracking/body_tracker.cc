@@ -15,6 +15,7 @@
 #include "geometry/cube_grid.h"
 #include "geometry/so3.h"
 #include "registration/mesh_cloud.h"
+#include "sensor/depth_timing.h"
 #include "tracking/sticker_terms.h"
 #include "util/check.h"
 #include "util/logging.h"
@@ -472,6 +473,19 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
       }
     }
   }
+  // What this frame's depth is worth less for being of another instant than
+  // its colour (sensor/depth_timing.h): the camera's motion relative to the
+  // patient from the last two poses, else the assumed hand-held motion.
+  DelayedDepthSigma delayed;
+  if (have_depth && frame.depth_delay_s != 0) {
+    std::optional<Rigid3d> step;
+    double step_s = 0;
+    if (m.past.size() == 2 && m.past[1].t > m.past[0].t && m.past[1].t - m.past[0].t < 0.5) {
+      step = m.past[1].pose * m.past[0].pose.Inverse();
+      step_s = m.past[1].t - m.past[0].t;
+    }
+    delayed = DelayedDepthSigmaOf(frame.depth_delay_s, step ? &*step : nullptr, step_s);
+  }
   const bool from_hint = !predicted && hint.has_value();
   if (from_hint) predicted = hint;
 
@@ -692,7 +706,8 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
           const Eigen::Vector3d d = p - q;
           if (d.norm() > gate) continue;
           const Eigen::Vector3d n = R * m.model_normals[i];
-          const double sigma = o.depth_sigma_const_m + o.depth_sigma_quad_per_m * z * z;
+          const double sensor = o.depth_sigma_const_m + o.depth_sigma_quad_per_m * z * z;
+          const double sigma = delayed.any() ? std::hypot(sensor, delayed.At(z)) : sensor;
           const double r = n.dot(d) / sigma;
           Vector6d J;
           J << p.cross(n) / sigma, n / sigma;

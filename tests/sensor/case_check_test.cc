@@ -12,6 +12,7 @@
 #include "sensor/tum_io.h"
 #include "util/check.h"
 #include "util/file.h"
+#include "util/string_util.h"
 
 namespace arpos {
 namespace {
@@ -106,6 +107,27 @@ TEST_F(CaseCheckTest, TimestampsThatAreNotSecondsAreNamedWithTheirLikelyUnit) {
   }
   WriteFileAtomic(root() / "room" / "rgb.txt", "1000000 rgb/0.png\n1033333 rgb/1.png\n1066667 rgb/2.png\n");
   ExpectError("room/rgb.txt", "these look like microseconds");
+}
+
+// Depth listed 8 ms after its colour (a camera without colour-depth sync):
+// a warning that says how far and what to do; the case stays usable.
+TEST_F(CaseCheckTest, DepthTakenAtOtherInstantsThanItsColourIsAWarning) {
+  const std::vector<ImageListEntry> depth = ReadImageList(root() / "room" / "depth.txt");
+  std::string text;
+  for (const auto& e : depth)
+    text += StringPrintf("%.6f %s\n", e.timestamp_s + 0.008, e.relative_path.c_str());
+  WriteFileAtomic(root() / "room" / "depth.txt", text);
+  const CaseCheckReport report = CheckCase(root());
+  EXPECT_TRUE(report.ok());
+  bool warned = false;
+  for (const auto& p : report.problems) {
+    warned |=
+        p.ToString().find("room/: depth images are a median 8.0 ms after their colour images") !=
+            std::string::npos &&
+        p.ToString().find("colour-depth sync") != std::string::npos;
+  }
+  EXPECT_TRUE(warned) << Problems();
+  EXPECT_NEAR(Sequence::Open(root() / "room").depth_delay_s(0), 0.008, 1e-6);
 }
 
 // Frames seconds apart (a slow recording, or a few stills of a walk) are

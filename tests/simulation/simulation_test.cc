@@ -31,6 +31,7 @@
 #include "sensor/tum_io.h"
 #include "simulation/conditions.h"
 #include "simulation/sensor_model.h"
+#include "simulation/simulation_truth.h"
 #include "simulation/simulator.h"
 #include "util/check.h"
 #include "util/file.h"
@@ -726,6 +727,40 @@ TEST(Case, XtionCasePassesCheckCase) {
   const SimulatedFrame frame = sim.RenderFrame(1, 2);
   EXPECT_NEAR(gt[2].timestamp_s, frame.timestamp_s, 1e-6);
   EXPECT_TRUE(gt[2].room_from_x.IsApprox(frame.room_from_camera, 1e-8, 1e-8));
+}
+
+// A camera without colour-depth sync: each depth image is of its own
+// instant and depth.txt says when; the reader hands the delay on per frame.
+TEST(Case, ADepthDelayIsRenderedAtItsOwnTimeAndListedWithIt) {
+  TempDir dir("arpos_sim_delay");
+  SimulationOptions o = SmallOptions();
+  o.room_frames = 2;
+  o.body_scan_frames = 2;
+  o.tracking_frames = 2;
+  o.noise = false;
+  o.depth_delay_s = 0.012;
+  const fs::path root = dir.path() / "case";
+  Simulator(o).WriteCase(root);
+  ExpectValidCase(root, o);
+  const CameraIntrinsics K = LoadCaseConfig(root / "case.yaml").camera;
+  const Sequence seq = Sequence::Open(root / "body_scan");
+  ASSERT_EQ(seq.size(), 2u);
+  for (size_t i = 0; i < seq.size(); ++i) {
+    EXPECT_NEAR(seq.depth_delay_s(i), 0.012, 1e-6);
+    EXPECT_NEAR(seq.LoadFrame(i, K).depth_delay_s, 0.012, 1e-6);
+  }
+  EXPECT_NEAR(LoadSimulationTruth(root / "simulation.yaml").depth_delay_s, 0.012, 1e-9);
+  // The same colour as without the delay, the depth of a camera 12 ms on
+  // (the first frame: the walk rests at its end).
+  SimulationOptions same_instant = o;
+  same_instant.depth_delay_s = 0;
+  const SimulatedFrame a = Simulator(same_instant).RenderFrame(1, 0);
+  const SimulatedFrame b = Simulator(o).RenderFrame(1, 0);
+  EXPECT_EQ(cv::norm(a.color, b.color, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::countNonZero(a.depth != b.depth), 1000);
+  EXPECT_NEAR(b.depth_timestamp_s - b.timestamp_s, 0.012, 1e-9);
+  o.depth_delay_s = 0.03;
+  EXPECT_NE(o.Check().find("depth-delay-ms"), std::string::npos);
 }
 
 // A two-frame case of `profile` passes check-case; its camera as case.yaml has it.
