@@ -178,6 +178,9 @@ struct SessionStageResult {
   std::vector<std::pair<int, int>> unmapped_room_markers;
   /// Frames the room map could not localise, posed from mapped stickers.
   int frames_posed_by_stickers = 0;
+  /// Frames whose depth, of another instant than their colour, was moved to
+  /// the colour instant (sensor/depth_timing.h: ColourFromDepthCamera).
+  int frames_depth_moved_to_colour = 0;
   /// How the scan's camera response was found (estimated, or assumed).
   std::string camera_response;
   BodyMarkerMapResult marker_map;

@@ -14,6 +14,10 @@
 /// frames tracked at 2.27-2.50 mm MTE against 1.69 mm as it was; the
 /// velocity from two poses 67 ms apart was off by as much as the motion).
 
+#include <cstddef>
+#include <optional>
+#include <vector>
+
 #include "geometry/rigid3.h"
 
 namespace arpos {
@@ -37,5 +41,18 @@ struct DelayedDepthSigma {
 /// without a step (nullptr, or step_s <= 0) the assumed hand-held motion.
 /// Zero for no delay.
 DelayedDepthSigma DelayedDepthSigmaOf(double delay_s, const Rigid3d* step, double step_s);
+
+/// Where a recording is processed as a whole (the body scan), the camera's
+/// motion over the delay is known from both sides: frame k's
+/// colour_from_depth_camera (points of the camera at its depth instant into
+/// the camera at its colour instant), the camera at the depth instant
+/// interpolated at constant velocity between the two posed frames around it
+/// (`room_from_camera` at `times_s`, in time order; beyond the last or before
+/// the first, from the nearest two). nullopt without a neighbour within
+/// kMaxInterpolationGapS, or with no delay.
+constexpr double kMaxInterpolationGapS = 0.5;
+std::optional<Rigid3d> ColourFromDepthCamera(const std::vector<double>& times_s,
+                                             const std::vector<Rigid3d>& room_from_camera, size_t k,
+                                             double delay_s);
 
 }  // namespace arpos
