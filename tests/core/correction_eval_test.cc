@@ -97,8 +97,9 @@ TEST(CorrectionEval, MalformedLinesAreNamed) {
   WriteFileAtomic(path, std::string(kHeader) + good + "2.0,0,0,0,0,0,0,0,0,inn\n");
   const std::string message = InputErrorOf([&] { ReadCorrectionsCsv(path); });
   EXPECT_NE(message.find(path.string() + ":3: state 'inn'"), std::string::npos) << message;
-  EXPECT_NE(InputErrorOf([&] { ReadCorrectionsCsv(dir.path() / "missing.csv"); }).find("missing.csv: cannot be read"),
-            std::string::npos);
+  const std::string missing = InputErrorOf([&] { ReadCorrectionsCsv(dir.path() / "missing.csv"); });
+  EXPECT_NE(missing.find("missing.csv: cannot open file for reading"), std::string::npos)
+      << missing;
 }
 
 // Hand-made frames with known true corrections (see Displaced):
