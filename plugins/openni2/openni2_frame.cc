@@ -6,6 +6,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "sensor/sequence.h"
 #include "util/check.h"
 
 namespace arpos {
@@ -96,6 +97,13 @@ RgbdFrame RgbdFrameFromOpenNi2(const OpenNi2Image& color, const OpenNi2Image& de
   } else {
     frame.depth = CopyRows(depth, "depth", 2, CV_16UC1, &problem);
     frame.depth_scale = scale;
+    // Both on the device's clock: the depth's own instant, when it is one a
+    // frame can pair (sensor/sequence.h); a farther one is not this colour
+    // image's depth instant but a stream the source paired late, left at 0.
+    const double delay_s =
+        (static_cast<double>(depth.timestamp_us) - static_cast<double>(color.timestamp_us)) * 1e-6;
+    if (!frame.depth.empty() && std::abs(delay_s) < kFrameAssociationS)
+      frame.depth_delay_s = delay_s;
   }
   AddProblem(&frame, problem);
   return frame;

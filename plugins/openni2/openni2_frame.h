@@ -40,7 +40,9 @@ double OpenNi2DepthScale(openni::PixelFormat format);
 /// - depth: CV_16UC1 with the values unchanged, depth_scale 1000 (1 mm) or
 ///   10000 (100 µm);
 /// - timestamp_s: the colour timestamp in seconds on the device's clock
-///   (not related to wall time);
+///   (not related to wall time); depth_delay_s: the depth's timestamp minus
+///   the colour's, when within kFrameAssociationS (a device without
+///   colour-depth sync takes them apart: sensor/depth_timing.h);
 /// - index and arrival are left for the source to fill.
 /// Depth must have the colour's size: a device that registers depth to
 /// colour delivers it so. Depth of another size is not registered to this

@@ -65,7 +65,8 @@ void SequenceRecorder::Push(const RgbdFrame& frame) {
     ++stats_.dropped;
     return;
   }
-  queue_.push_back({frame.timestamp_s, frame.color, frame.depth, frame.depth_scale});
+  queue_.push_back({frame.timestamp_s, frame.color, frame.depth, frame.depth_scale,
+                    frame.depth.empty() ? 0.0 : frame.depth_delay_s});
   if (frame.true_room_from_camera) camera_truth_.push_back({frame.timestamp_s, *frame.true_room_from_camera});
   if (frame.true_room_from_model) body_truth_.push_back({frame.timestamp_s, *frame.true_room_from_model});
   stats_.max_queue = std::max(stats_.max_queue, static_cast<int>(queue_.size()));
@@ -116,7 +117,8 @@ void SequenceRecorder::Write() {
                     (item.depth.empty() || WriteRaw(spool / (stem + ".depth"), item.depth));
     std::lock_guard<std::mutex> lock(mutex_);
     if (ok) {
-      spooled_.push_back({item.timestamp_s, item.depth_scale, !item.depth.empty()});
+      spooled_.push_back(
+          {item.timestamp_s, item.depth_scale, !item.depth.empty(), item.depth_delay_s});
     } else {
       ++stats_.write_failures;
       if (stats_.first_failure.empty()) stats_.first_failure = (spool / stem).string() + ": could not be written";
@@ -153,7 +155,9 @@ void SequenceRecorder::WritePng(Item item) {
   }
   if (depth_ok) {
     ++stats_.depth_written;
-    depth_.push_back({item.timestamp_s, "depth/" + name, 0});
+    // At the depth's own instant when the source knows it (a camera without
+    // colour-depth sync): the reader hands the delay on (depth_timing.h).
+    depth_.push_back({item.timestamp_s + item.depth_delay_s, "depth/" + name, 0});
   }
   if (!failure.empty()) {
     ++stats_.write_failures;
@@ -181,7 +185,8 @@ RecorderStats SequenceRecorder::Finish() {
           const Spooled& s = spooled_[k];
           const std::string stem = StringPrintf("%.6f", s.timestamp_s);
           Item item{s.timestamp_s, ReadRaw(out_dir_ / ".spool" / (stem + ".colour")),
-                    s.has_depth ? ReadRaw(out_dir_ / ".spool" / (stem + ".depth")) : cv::Mat(), s.depth_scale};
+                    s.has_depth ? ReadRaw(out_dir_ / ".spool" / (stem + ".depth")) : cv::Mat(),
+                    s.depth_scale, s.depth_delay_s};
           if (item.color.empty()) {
             std::lock_guard<std::mutex> lock(mutex_);
             ++stats_.write_failures;

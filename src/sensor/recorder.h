@@ -75,6 +75,7 @@ class SequenceRecorder {
     double timestamp_s;
     cv::Mat color, depth;
     double depth_scale;
+    double depth_delay_s = 0;  ///< RgbdFrame::depth_delay_s: depth.txt lists it at its own time
   };
   std::vector<StampedPose> camera_truth_, body_truth_;  ///< frames that carried truth
   void Write();
@@ -93,6 +94,7 @@ class SequenceRecorder {
     double timestamp_s;
     double depth_scale;
     bool has_depth;
+    double depth_delay_s;
   };
   std::vector<Spooled> spooled_;  ///< encode_later: frames in .spool/
   std::vector<std::thread> writers_;

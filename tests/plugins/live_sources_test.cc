@@ -311,6 +311,32 @@ TEST(Recorder, EncodingLaterWritesTheSameSequenceAndLeavesNoSpool) {
   }
 }
 
+// A source that knows its depth was taken 8 ms after the colour (no
+// colour-depth sync): depth.txt lists it at its own time, written at once
+// or later, and the reader hands the delay back.
+TEST(Recorder, DepthOfItsOwnInstantIsListedAtIt) {
+  for (const bool later : {false, true}) {
+    TempDir dir;
+    RecorderOptions options;
+    options.encode_later = later;
+    {
+      SequenceRecorder recorder(dir.path() / "seq", options);
+      for (int i = 0; i < 3; ++i) {
+        RgbdFrame frame = SyntheticFrame(i, 1000);
+        frame.depth_delay_s = 0.008;
+        recorder.Push(frame);
+      }
+      EXPECT_EQ(recorder.Finish().depth_written, 3);
+    }
+    const Sequence replay = Sequence::Open(dir.path() / "seq");
+    ASSERT_EQ(replay.size(), 3u) << later;
+    for (size_t i = 0; i < 3; ++i) {
+      EXPECT_NEAR(replay.depth_delay_s(i), 0.008, 1e-6) << later << " " << i;
+      EXPECT_NEAR(replay.LoadFrame(i, SmallCamera(1000)).DepthM(3, 3), (800 + i) / 1000.0, 1e-9);
+    }
+  }
+}
+
 TEST(Recorder, AFullQueueDropsFramesAndCountsThemInsteadOfWaiting) {
   TempDir dir;
   RecorderOptions options;

@@ -128,6 +128,7 @@ TEST(Openni2Frame, ARealKinectFrameComesThroughUnchanged) {
   EXPECT_EQ(cv::norm(frame.depth, k.depth, cv::NORM_INF), 0);
   EXPECT_EQ(frame.depth_scale, 1000);
   EXPECT_DOUBLE_EQ(frame.timestamp_s, 51234.56789);  // the colour's microseconds, in seconds
+  EXPECT_NEAR(frame.depth_delay_s, 120e-6, 1e-9);    // the depth's own instant, 120 us later
   EXPECT_EQ(frame.index, -1);  // the source numbers its frames
 
   std::vector<uint16_t> valid;
@@ -156,6 +157,10 @@ TEST(Openni2Frame, DepthIn100MicrometreUnitsKeepsItsValuesAndScale) {
   EXPECT_EQ(cv::norm(frame.depth, depth_100um, cv::NORM_INF), 0);
   EXPECT_DOUBLE_EQ(frame.DepthM(320, 240), 0.860);
   EXPECT_DOUBLE_EQ(frame.DepthM(100, 100), 1.273);
+  // A depth image 25 ms from its colour is not one a frame pairs: no delay.
+  const Buffer late =
+      AsOpenNi2(depth_100um, openni::PIXEL_FORMAT_DEPTH_100_UM, 0, kTimestampUs + 25000);
+  EXPECT_EQ(RgbdFrameFromOpenNi2(k.color_buffer.image, late.image).depth_delay_s, 0.0);
 }
 
 TEST(Openni2Frame, KinectFieldsOfViewGiveItsIntrinsics) {
