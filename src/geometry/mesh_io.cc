@@ -134,12 +134,12 @@ TriangleMesh LoadTriangleMesh(const std::filesystem::path& path, const MeshLoadO
     std::string head(8, '\0');
     in.read(head.data(), static_cast<std::streamsize>(head.size()));
     head.resize(static_cast<size_t>(std::max<std::streamsize>(0, in.gcount())));
-    if (TextMeshStart(head) > 0) {
+    if (const size_t start = TextMeshStart(head); start > 0) {
       // assimp reads a byte-order mark into the first line (an OBJ's first
       // vertex lost, "vertex index out of range"): read without it.
       std::ostringstream buffer;
       buffer << in.rdbuf();
-      const std::string data = head.substr(TextMeshStart(head)) + buffer.str();
+      const std::string data = head.substr(start) + buffer.str();
       const std::string hint = ToLower(path.extension().string()).substr(1);
       scene = importer.ReadFileFromMemory(data.data(), data.size(), flags, hint.c_str());
     } else {

@@ -1046,14 +1046,17 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
   {
     // The camera's speed and turn rate from its last two poses, else the
     // assumed hand-held motion.
-    std::optional<Rigid3d> step;
-    double step_s = 0;
-    if (m.have_last && m.have_prev && m.last_t > m.prev_t && frame.timestamp_s - m.last_t < 0.5) {
-      step = m.last_camera_from_room * m.prev_camera_from_room.Inverse();
-      step_s = m.last_t - m.prev_t;
+    // Only for depth of another instant: synced frames skip it.
+    m.delayed = DelayedDepthSigma();
+    if (!frame.depth.empty() && frame.depth_delay_s != 0) {
+      std::optional<Rigid3d> step;
+      double step_s = 0;
+      if (m.have_last && m.have_prev && m.last_t > m.prev_t && frame.timestamp_s - m.last_t < 0.5) {
+        step = m.last_camera_from_room * m.prev_camera_from_room.Inverse();
+        step_s = m.last_t - m.prev_t;
+      }
+      m.delayed = DelayedDepthSigmaOf(frame.depth_delay_s, step ? &*step : nullptr, step_s);
     }
-    m.delayed = DelayedDepthSigmaOf(frame.depth.empty() ? 0.0 : frame.depth_delay_s,
-                                    step ? &*step : nullptr, step_s);
   }
   const std::optional<Rigid3d> search_start = m.search_start;  // this frame's only
   m.search_start.reset();

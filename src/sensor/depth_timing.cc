@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <cmath>
 
-#include "geometry/so3.h"
-
 namespace arpos {
 
 DelayedDepthSigma DelayedDepthSigmaOf(double delay_s, const Rigid3d* step, double step_s) {
@@ -14,7 +12,7 @@ DelayedDepthSigma DelayedDepthSigmaOf(double delay_s, const Rigid3d* step, doubl
   double speed = kAssumedHandheldSpeedMS, turn = kAssumedHandheldTurnRadS;
   if (step != nullptr && step_s > 0) {
     speed = step->translation.norm() / step_s;
-    turn = RotationVectorFromQuaternion(step->rotation).norm() / step_s;
+    turn = step->RotationVector().norm() / step_s;
   }
   s.const_m = delay * speed;
   s.per_m = delay * turn;
@@ -33,13 +31,12 @@ std::optional<Rigid3d> ColourFromDepthCamera(const std::vector<double>& times_s,
   const size_t b = a + 1;
   const double gap = times_s[b] - times_s[a];
   if (!(gap > 0 && gap <= kMaxInterpolationGapS)) return std::nullopt;
-  const double tau = times_s[k] + delay_s;
+  // Constant velocity: the motion a -> b scaled to the depth instant.
+  const double f = (times_s[k] + delay_s - times_s[a]) / gap;
   const Rigid3d a_from_b = room_from_camera[a].Inverse() * room_from_camera[b];
-  const Eigen::Vector3d w =
-      RotationVectorFromQuaternion(a_from_b.rotation) * ((tau - times_s[a]) / gap);
   const Rigid3d room_from_depth_camera =
       room_from_camera[a] *
-      Rigid3d(QuaternionFromRotationVector(w), a_from_b.translation * ((tau - times_s[a]) / gap));
+      Rigid3d::FromRotationVector(f * a_from_b.RotationVector(), f * a_from_b.translation);
   return room_from_camera[k].Inverse() * room_from_depth_camera;
 }
 
