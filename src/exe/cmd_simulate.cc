@@ -66,8 +66,9 @@ const char kUsage[] =
     "                              (floor near the couch, farther, on a wall), its\n"
     "                              visibility (good, medium, poor: a few glancing views),\n"
     "                              room marker count and size, room size, walk and pace,\n"
-    "                              response, auto exposure, depth bias, breathing; the\n"
-    "                              options above force a condition over the drawn one\n";
+    "                              response, auto exposure, depth bias, breathing,\n"
+    "                              colour-depth sync; the options above force a condition\n"
+    "                              over the drawn one\n";
 
 void ParseFrames(const std::string& text, sim::SimulationOptions* options) {
   size_t start = 0;
@@ -164,13 +165,13 @@ int RunSimulateCommand(const std::vector<std::string>& argv) {
       std::cerr << StringPrintf(
           "simulate: conditions: origin %s (%s), %s views: seen in %d of %d room frames, %.0f px, "
           "%.0f deg; %zu room markers of %.2f m; response %s%s; depth scale %+.3f %%, field %.1f "
-          "mm%s; breathing %.1f mm\n",
+          "mm%s; breathing %.1f mm; depth %+.1f ms after its colour\n",
           c->origin_placement.c_str(), c->origin_surface.c_str(), c->origin_visibility.c_str(),
           v.visible_frames, v.frames, v.median_side_px, v.median_angle_deg,
           simulator.world().room_markers.size() - 1, c->room_marker_size_m,
           sim::ResponseName(c->response).c_str(), c->auto_exposure ? " + auto exposure" : "",
           100 * c->depth_scale_error, c->depth_field_mm, c->flying_pixels ? ", flying pixels" : "",
-          c->breathing_mm);
+          c->breathing_mm, c->depth_delay_ms);
     }
     int last_percent = -1;
     const sim::SimulationReport report =

@@ -559,6 +559,8 @@ struct CameraLocalizer::Impl {
   void BuildCorrespondences() {
     corr.clear();
     corr.reserve(4 * markers.size() + keypoints.size());
+    // Depth of another instant: one motion shared by all its readings.
+    if (delayed.any()) corr.depth_motion_covariance = delayed.Covariance();
     double support = 0;
     for (const auto& obs : markers) {
       if (obs.status != MarkerStatus::kRefined) continue;
@@ -1287,6 +1289,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     out.ok = true;
     out.message.clear();
     out.room_from_camera = refined.camera_from_room.Inverse();
+    out.depth_camera_motion = refined.depth_camera_motion;
     m.prev_camera_from_room = m.last_camera_from_room;
     m.prev_t = m.last_t;
     m.have_prev = m.have_last && m.frames_lost == 0;

@@ -374,6 +374,11 @@ struct LocalizationResult {
   /// map does not hold (left out of it, or never seen while mapping): what a
   /// caller names when the frame cannot be placed.
   std::vector<int> unmapped_marker_ids;
+  /// Depth of another instant than the colour: the camera's motion between
+  /// them as the room's depth measured it (on the left perturbation of
+  /// camera_from_room, i.e. in the camera's axes), for the body tracker to
+  /// take the frame's depth of the patient at.
+  std::optional<DepthCameraMotion> depth_camera_motion;
 };
 
 class CameraLocalizer {

@@ -6,10 +6,12 @@
 #include <Eigen/Cholesky>
 
 #include "geometry/so3.h"
+#include "sensor/depth_timing.h"
 
 namespace arpos {
 
 void PoseCorrespondences::clear() {
+  depth_motion_covariance.setZero();
   plane_point_in_room.clear();
   plane_normal_in_room.clear();
   plane_ray.clear();
@@ -89,7 +91,7 @@ using Vec6 = Eigen::Matrix<double, 6, 1>;
 // information) and depth; used = false when it carries no weight.
 struct PointTerms {
   Mat6 H_pixel, H_depth;
-  Vec6 g;
+  Vec6 g, g_depth;
   bool used = false;
 };
 
@@ -119,6 +121,7 @@ inline PointTerms PointTermsAt(const Eigen::Vector3d& p, const PoseCorrespondenc
   out.H_pixel.noalias() = w * J.transpose() * J;
   out.g.noalias() = w * J.transpose() * Eigen::Vector2d(ru, rv);
   out.H_depth.setZero();
+  out.g_depth.setZero();
   if (corr.inv_sigma_depth[i] > 0) {
     const double sd = corr.inv_sigma_depth[i];
     const double rd = (p.z() - corr.depth_m[i]) * sd;
@@ -129,7 +132,7 @@ inline PointTerms PointTermsAt(const Eigen::Vector3d& p, const PoseCorrespondenc
       Jd << p.y(), -p.x(), 0, 0, 0, 1;
       Jd *= sd;
       out.H_depth.noalias() = wd * Jd * Jd.transpose();
-      out.g.noalias() += wd * Jd * rd;
+      out.g_depth.noalias() = wd * Jd * rd;
     }
   }
   return out;
@@ -144,6 +147,7 @@ Eigen::Matrix<double, 6, 6> PointInformation(const PoseCorrespondences& corr, si
   const bool tukey = options.max_iterations > options.huber_iterations;
   const PointTerms terms =
       PointTermsAt(camera_from_room * corr.points_in_room[i], corr, i, intrinsics, tukey, options);
+  // Each point's own share: depth of another instant is not marginalised here.
   return terms.used ? Mat6(terms.H_pixel + terms.H_depth) : Mat6::Zero();
 }
 
@@ -164,13 +168,18 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   Eigen::Matrix3d prior_R_inv = Eigen::Matrix3d::Identity();
   if (prior) prior_R_inv = prior->camera_from_room.RotationMatrix().transpose();
 
-  Mat6 H, H_prior = Mat6::Zero(), H_marker = Mat6::Zero();
-  Vec6 g;
+  Mat6 H, H_prior = Mat6::Zero(), H_marker = Mat6::Zero(), H_depth;
+  Vec6 g, g_depth;
+  const bool delayed_depth = !corr.depth_motion_covariance.isZero(0);
+  DepthCameraMotion depth_motion;
+  Vec6 last_step = Vec6::Zero();
   for (int it = 0; it < options.max_iterations; ++it) {
     H.setZero();
     H_prior.setZero();
     H_marker.setZero();
+    H_depth.setZero();
     g.setZero();
+    g_depth.setZero();
     const bool tukey = it >= options.huber_iterations;
     int used = 0;
     for (size_t i = 0; i < n; ++i) {
@@ -178,9 +187,11 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
           PointTermsAt(R * corr.points_in_room[i] + t, corr, i, intrinsics, tukey, options);
       if (!terms.used) continue;
       ++used;
-      H.noalias() += terms.H_pixel + terms.H_depth;
+      H.noalias() += terms.H_pixel;
+      H_depth.noalias() += terms.H_depth;
       if (corr.group[i] == CorrespondenceGroup::kMarker) H_marker.noalias() += terms.H_pixel;
       g.noalias() += terms.g;
+      g_depth.noalias() += terms.g_depth;
     }
     // Plane depths: z = (n.q) / (n.r) with n = R n_room, q = R p_room + t;
     // dz/domega = -(n.q) / (n.r)^2 (n x r), dz/dt = n / (n.r).
@@ -200,9 +211,16 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
       J.head<3>() = -(nq / (nr * nr)) * nc.cross(ray);
       J.tail<3>() = nc / nr;
       J *= s;
-      H.noalias() += w * J * J.transpose();
-      g.noalias() += w * J * r;
+      H_depth.noalias() += w * J * J.transpose();
+      g_depth.noalias() += w * J * r;
     }
+    if (delayed_depth) {
+      depth_motion =
+          MeasuredSharedMotion(corr.depth_motion_covariance, H_depth, g_depth, Vec6::Zero());
+      MarginaliseSharedMotion(corr.depth_motion_covariance, &H_depth, &g_depth);
+    }
+    H += H_depth;
+    g += g_depth;
     if (prior) {
       const Eigen::Matrix3d dR = R * prior_R_inv;
       const Eigen::Vector3d e_rot = RotationVectorFromQuaternion(Eigen::Quaterniond(dR));
@@ -229,6 +247,7 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
     if (ldlt.info() != Eigen::Success) break;
     const Vec6 delta = -ldlt.solve(g);
     if (!delta.allFinite()) break;
+    last_step = delta;
     const Eigen::Matrix3d dR = QuaternionFromRotationVector(delta.head<3>()).toRotationMatrix();
     R = dR * R;
     t = dR * t + delta.tail<3>();
@@ -244,6 +263,11 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   result.information = H;
   result.data_information = H - H_prior;
   result.marker_information = H_marker;
+  if (delayed_depth && result.iterations > 0) {
+    // Measured at the pose before the last step: relative to the pose after it.
+    depth_motion.mean -= last_step;
+    result.depth_camera_motion = depth_motion;
+  }
 
   // Inliers and residual statistics at the solution.
   double sum_m = 0, sum_k = 0;

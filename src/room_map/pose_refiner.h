@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "geometry/rigid3.h"
+#include "sensor/depth_timing.h"
 #include "sensor/intrinsics.h"
 
 namespace arpos {
@@ -48,6 +49,13 @@ struct PoseCorrespondences {
   std::vector<Eigen::Vector2d> plane_ray;   ///< (x, y) of the ray (x, y, 1)
   std::vector<float> plane_depth_m;
   std::vector<float> plane_inv_sigma;
+
+  /// Depth of another instant than the colour (sensor/depth_timing.h): the
+  /// covariance of the camera's unknown motion between them, on the left
+  /// perturbation [rotation; translation] of camera_from_room, shared by
+  /// every depth reading above (point depths and plane depths alike), which
+  /// the refinement marginalises out. Zero: depth of the colour's instant.
+  Eigen::Matrix<double, 6, 6> depth_motion_covariance = Eigen::Matrix<double, 6, 6>::Zero();
 
   size_t size() const { return pixels.size(); }
   void clear();
@@ -101,6 +109,10 @@ struct PoseRefinementResult {
   Eigen::Matrix<double, 6, 6> data_information = Eigen::Matrix<double, 6, 6>::Zero();
   /// What the marker corners alone say (their pixels, at their weights).
   Eigen::Matrix<double, 6, 6> marker_information = Eigen::Matrix<double, 6, 6>::Zero();
+  /// Depth of another instant (PoseCorrespondences::depth_motion_covariance
+  /// set): the camera's motion from the colour instant to the depth's as the
+  /// depth readings measured it at the solution (sensor/depth_timing.h).
+  std::optional<DepthCameraMotion> depth_camera_motion;
 };
 
 /// Refines `camera_from_room_initial`. Never throws for bad geometry: with

@@ -24,6 +24,7 @@
 #include "room_map/marker_graph.h"
 #include "room_map/pose_refiner.h"
 #include "room_map/room_planes.h"
+#include "sensor/depth_timing.h"
 #include "util/check.h"
 #include "util/logging.h"
 #include "util/string_util.h"
@@ -405,8 +406,26 @@ std::string RoomMapBuildReport::ToText() const {
   out << StringPrintf("adjustment: markers %d it %.2f s; joint %d it %.2f s\n",
                       marker_adjustment.iterations, marker_adjustment.seconds,
                       joint_adjustment.iterations, joint_adjustment.seconds);
-  out << StringPrintf("time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, adjustment %.2f s, total %.2f s\n",
-                      frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
+  out << StringPrintf(
+      "time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, adjustment %.2f s, total %.2f "
+      "s",
+      frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
+  if (first_pass_s > 0) out << StringPrintf(" (a first pass %.2f s of it)", first_pass_s);
+  out << "\n";
+  if (frames_depth_delayed > 0 && frames_depth_moved_to_colour > 0) {
+    out << StringPrintf(
+        "depth of another instant (a median %.1f ms after its colour): read as of the colour's "
+        "instant in %d of "
+        "%d frames, by the camera's motion between the frames around them as a first pass placed "
+        "them\n",
+        1000 * depth_delay_s, frames_depth_moved_to_colour, frames_depth_delayed);
+  } else if (frames_depth_delayed > 0) {
+    out << StringPrintf(
+        "depth of another instant (a median %.1f ms after its colour): used as read in all %d "
+        "frames (none has "
+        "a placed frame within %.1f s to take the camera's motion from)\n",
+        1000 * depth_delay_s, frames_depth_delayed, kMaxInterpolationGapS);
+  }
   out << StringPrintf(
       "room frame (origin marker, %d views): tilt %.4f deg, yaw %.4f deg, position at the couch "
       "%.3f mm (1 sigma)",
@@ -439,9 +458,69 @@ std::string RoomMapBuildReport::ToText() const {
   return out.str();
 }
 
-RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& config,
+namespace {
+
+RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& config,
+                                    const RoomMapBuildOptions& options,
+                                    const ControllerCallbacks& callbacks);
+
+}  // namespace
+
+RoomMapBuildResult BuildRoomMap(const Sequence& room, const CaseConfig& config,
                                 const RoomMapBuildOptions& options,
                                 const ControllerCallbacks& callbacks) {
+  RoomMapBuildOptions build = options;
+  RoomMapBuildResult first = BuildRoomMapOnce(room, config, build, callbacks);
+  // Depth of another instant than its colour (sensor/depth_timing.h): a
+  // room walk turns at up to 170 deg/s, so 10 ms moves what the depth saw by
+  // centimetres at 3 m, and the adjustment's depth terms pull each frame
+  // towards its depth camera; the map is built again with each frame's
+  // depth read as of its colour instant, by the camera's motion between the
+  // frames around it as this pass placed them.
+  std::vector<double> delays;
+  for (size_t i = 0; i < room.size(); ++i) {
+    if (room.has_depth(i) && room.depth_delay_s(i) != 0) delays.push_back(room.depth_delay_s(i));
+  }
+  if (delays.empty() || !options.colour_from_depth.empty()) return first;
+  std::vector<std::pair<int, Rigid3d>> posed = first.report.room_from_camera;
+  std::sort(posed.begin(), posed.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<double> times;
+  std::vector<Rigid3d> poses;
+  for (const auto& [index, pose] : posed) {
+    times.push_back(room.timestamp_s(index));
+    poses.push_back(pose);
+  }
+  for (size_t k = 0; k < posed.size(); ++k) {
+    const int index = posed[k].first;
+    if (!room.has_depth(index) || room.depth_delay_s(index) == 0) continue;
+    if (const std::optional<Rigid3d> m =
+            ColourFromDepthCamera(times, poses, k, room.depth_delay_s(index))) {
+      build.colour_from_depth[index] = *m;
+    }
+  }
+  std::nth_element(delays.begin(), delays.begin() + delays.size() / 2, delays.end());
+  const double median_delay_s = delays[delays.size() / 2];
+  if (build.colour_from_depth.empty()) {
+    // No posed frame with a posed neighbour within reach: as it was read.
+    first.report.depth_delay_s = median_delay_s;
+    first.report.frames_depth_delayed = static_cast<int>(delays.size());
+    return first;
+  }
+  RoomMapBuildResult second = BuildRoomMapOnce(room, config, build, callbacks);
+  second.report.depth_delay_s = median_delay_s;
+  second.report.frames_depth_delayed = static_cast<int>(delays.size());
+  second.report.frames_depth_moved_to_colour = static_cast<int>(build.colour_from_depth.size());
+  second.report.first_pass_s = first.report.total_s;
+  second.report.total_s += first.report.total_s;
+  return second;
+}
+
+namespace {
+
+RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& config,
+                                    const RoomMapBuildOptions& options,
+                                    const ControllerCallbacks& callbacks) {
   std::string reason;
   ARPOS_CHECK(options.Check(&reason), "invalid room map options: " << reason);
   const auto t_start = Clock::now();
@@ -512,7 +591,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
           if (slot >= static_cast<int>(indices.size())) break;
           FrameData& f = frames[slot];
           f.index = indices[slot];
-          const RgbdFrame frame = sequence.LoadFrame(f.index, K);
+          RgbdFrame frame = sequence.LoadFrame(f.index, K);
+          if (const auto moved = options.colour_from_depth.find(f.index);
+              moved != options.colour_from_depth.end() && !frame.depth.empty()) {
+            frame.depth = DepthAtColourInstant(frame.depth, K.depth_scale, K.fx, K.fy, K.cx, K.cy,
+                                               moved->second);
+          }
           cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
           if (!plane_grid.px.empty() && !frame.depth.empty()) {
             f.grid_z.resize(plane_grid.px.size());
@@ -1933,7 +2017,15 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       }
       return true;
     };
-    map.surface = BuildRoomSurface(sequence, K, map.depth_correction, report.room_from_camera, keep,
+    // Depth read as of its colour instant: the depth camera's own pose.
+    std::vector<std::pair<int, Rigid3d>> depth_cameras = report.room_from_camera;
+    for (auto& [index, pose] : depth_cameras) {
+      if (const auto moved = options.colour_from_depth.find(index);
+          moved != options.colour_from_depth.end()) {
+        pose = pose * moved->second;
+      }
+    }
+    map.surface = BuildRoomSurface(sequence, K, map.depth_correction, depth_cameras, keep,
                                    options.couch_point_in_room, options.surface, &report.surface);
     if (!map.depth_correction.IsIdentity() && !map.surface.empty()) {
       report.surface.note = "kept, but tracking leaves it out: the depth needed a correction, and what a "
@@ -1947,4 +2039,5 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   return result;
 }
 
+}  // namespace
 }  // namespace arpos

@@ -27,6 +27,7 @@
 #include <filesystem>
 #include <functional>
 #include <limits>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -60,6 +61,13 @@ std::optional<int> SolutionBySupportDepth(const MarkerPose& pose,
                                           const CameraIntrinsics& K, const BaOptions& ba_options);
 
 struct RoomMapBuildOptions {
+  /// Depth of another instant than its colour (sensor/depth_timing.h), a
+  /// second pass: frame (sequence index) -> the camera's motion from its
+  /// colour instant to its depth's (colour_from_depth camera), from the
+  /// first pass's poses; each such frame's depth is read as of its colour
+  /// instant (DepthAtColourInstant), the room surface likewise.
+  std::map<int, Rigid3d> colour_from_depth;
+
   /// Room-marker detection; dictionary and id range are taken from the case
   /// by MakeRoomMapBuildOptions.
   MarkerDetectorOptions detector;
@@ -339,6 +347,12 @@ struct RoomMapBuildReport {
   RoomSurfaceReport surface;
   /// Camera poses of the used frames (sequence index, room_from_camera).
   std::vector<std::pair<int, Rigid3d>> room_from_camera;
+  /// Depth of another instant than its colour: the median delay (s) and the
+  /// frames whose depth was read as of its colour instant (a second pass,
+  /// RoomMapBuildOptions::colour_from_depth), of those with delayed depth.
+  double depth_delay_s = 0;
+  int frames_depth_moved_to_colour = 0, frames_depth_delayed = 0;
+  double first_pass_s = 0;  ///< the first pass's time, included in total_s
 
   std::string ToText() const;
 };
@@ -349,6 +363,10 @@ struct RoomMapBuildResult {
 };
 
 /// Builds the map of `sequence` (the room/ folder of a case with `config`).
+/// Depth of another instant than its colour: built twice, the second time
+/// with each frame's depth read as of its colour instant by the camera's
+/// motion between the frames around it as the first placed them
+/// (RoomMapBuildOptions::colour_from_depth, unless given).
 /// Throws InputError naming the file for unreadable frames, and when the
 /// origin marker is never seen (the room frame would be undefined) or no
 /// usable marker is found; Cancelled if `callbacks.cancel_requested` says so.

@@ -134,6 +134,10 @@ SceneConditions DrawSceneConditions(uint64_t seed) {
   // Patient.
   const double breathing_draw = rng.Uniform(), breathing = rng.Uniform(3, 6);
   c.breathing_mm = breathing_draw < 0.7 ? std::round(breathing * 100) / 100 : 0.0;
+
+  // Colour-depth sync.
+  const double delay_draw = rng.Uniform(), delay = rng.Uniform(2, 15), sign = rng.Uniform();
+  c.depth_delay_ms = delay_draw < 0.4 ? (sign < 0.5 ? -1 : 1) * std::round(delay * 10) / 10 : 0.0;
   return c;
 }
 

@@ -28,7 +28,11 @@
 /// - response: srgb, linear, gamma2.6, scurve (0.25 each); auto exposure 0.3;
 /// - depth: scale error +-0.6 % (0.6, else 0), error field 1-4 mm at 1 m
 ///   (0.5, else 0), flying pixels 0.5;
-/// - breathing: 3-6 mm peak to peak (0.7, else none).
+/// - breathing: 3-6 mm peak to peak (0.7, else none);
+/// - colour-depth sync: depth taken 2-15 ms after or before its colour
+///   (0.4: a camera without sync, as OpenNI2 cameras without registration;
+///   else of the colour's instant). Drawn last: the draws above are as
+///   they were before it was added.
 
 #include <cstdint>
 #include <string>
@@ -63,6 +67,8 @@ struct SceneConditions {
   bool flying_pixels = false;
   // Patient.
   double breathing_mm = 0;
+  // Colour-depth sync: the depth image's instant after its colour's (ms).
+  double depth_delay_ms = 0;
 };
 
 /// The conditions of `seed` (see the header comment).

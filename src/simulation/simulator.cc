@@ -118,7 +118,8 @@ std::string SimulationOptions::Check() const {
   if (breathing_mm && !(*breathing_mm >= 0 && *breathing_mm <= 30)) return "breathing-mm: must be 0..30";
   if (!(sharpen_amount >= 0 && sharpen_amount <= 3)) return "sharpen: must be 0..3";
   // Within the colour-depth association window (sensor/sequence.h: 0.02 s).
-  if (!(std::abs(depth_delay_s) <= 0.015)) return "depth-delay-ms: must be within +-15 ms";
+  if (depth_delay_s && !(std::abs(*depth_delay_s) <= 0.015))
+    return "depth-delay-ms: must be within +-15 ms";
   if (const int id = ArucoDictionaryId(dictionary); id < 0) {
     return "dictionary: unknown ArUco dictionary '" + dictionary + "'";
   } else if (cv::aruco::getPredefinedDictionary(id)->bytesList.rows < 200) {
@@ -243,6 +244,11 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
     c.breathing_mm = *options_.breathing_mm;
     forced_.push_back("breathing_mm");
   }
+  if (options_.depth_delay_s) {
+    c.depth_delay_ms = 1000 * *options_.depth_delay_s;
+    if (random_conditions_) forced_.push_back("depth_delay_ms");
+  }
+  depth_delay_s_ = c.depth_delay_ms / 1000;
   world_ = BuildWorld(wo);
 
   response_ = c.response;
@@ -793,14 +799,14 @@ SimulatedFrame Simulator::RenderFrame(int sequence, int frame) const {
   SimulatedFrame out = RenderScene(scene, options_.noise, key, &scene_at);
   out.timestamp_s = s.timestamp(frame);
   out.depth_timestamp_s = out.timestamp_s;
-  if (options_.depth_delay_s != 0) {
+  if (depth_delay_s_ != 0) {
     // The depth sensor's exposure at its own time: the scene rendered again
     // there (camera, patient, breathing), its depth kept.
-    const Scene later = SceneAt(sequence, frame, options_.depth_delay_s);
+    const Scene later = SceneAt(sequence, frame, depth_delay_s_);
     const uint64_t depth_key = Hash3(key, 0x64657074ULL, 1);
     SimulatedFrame depth_frame = RenderScene(later, options_.noise, depth_key, nullptr);
     out.depth = depth_frame.depth;
-    out.depth_timestamp_s = out.timestamp_s + options_.depth_delay_s;
+    out.depth_timestamp_s = out.timestamp_s + depth_delay_s_;
   }
   return ToRoomFrame(std::move(out));
 }
@@ -876,7 +882,7 @@ SimulationTruth Simulator::Truth() const {
   t.response = ResponseName(response_);
   t.auto_exposure = auto_exposure_.enabled();
   t.sharpen_amount = options_.sharpen_amount;
-  t.depth_delay_s = options_.depth_delay_s;
+  t.depth_delay_s = depth_delay_s_;
   for (const auto& w : auto_exposure_.waves) {
     t.exposure_waves.push_back({w.frequency_hz, w.phase_rad, w.weight_stops});
   }
@@ -925,6 +931,7 @@ SimulationTruth Simulator::Truth() const {
     add("depth_field_mm", num(c.depth_field_mm, "%.2f"));
     add("flying_pixels", c.flying_pixels ? "true" : "false");
     add("breathing_mm", num(c.breathing_mm, "%.2f"));
+    add("depth_delay_ms", num(c.depth_delay_ms, "%.1f"));
     std::string forced = "[";
     for (size_t i = 0; i < forced_.size(); ++i) forced += (i ? ", " : "") + forced_[i];
     add("forced", forced + "]");

@@ -93,7 +93,7 @@ struct SimulationOptions {
   /// camera without hardware sync between its colour and depth sensors
   /// records: each depth image rendered at its own time and listed in
   /// depth.txt with its own timestamp (0: the same instant).
-  double depth_delay_s = 0;
+  std::optional<double> depth_delay_s;
   /// Lens distortion of the colour camera (OpenCV k1 k2 p1 p2 k3; the depth
   /// is registered to it): the frames are rendered through it and case.yaml
   /// lists it. Must be invertible over the image.
@@ -254,6 +254,7 @@ class Simulator {
   DepthBias depth_bias_;
   uint64_t depth_field_seed_ = 0;
   double breathing_m_ = 0, breathing_period_s_ = 0, breathing_phase_rad_ = 0;
+  double depth_delay_s_ = 0;                      ///< forced, else drawn (conditions), else 0
   std::vector<double> sticker_breathing_weight_;  ///< parallel to world_.body_markers
   OriginVisibility origin_visibility_;
   // Lens distortion: frames are rendered by an ideal camera wide enough for

@@ -46,6 +46,7 @@
 #include "features/marker_pose.h"
 #include "geometry/rigid3.h"
 #include "geometry/triangle_mesh.h"
+#include "sensor/depth_timing.h"
 #include "sensor/intrinsics.h"
 #include "sensor/rgbd_frame.h"
 
@@ -227,7 +228,13 @@ class BodyTracker {
   /// `hint`: where the caller expects the model (e.g. the patient's last room
   /// pose seen from the camera's last room pose), used when the tracker has
   /// no recent pose of its own.
-  BodyPoseResult Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint = std::nullopt);
+  /// `depth_motion`: for depth of another instant than the colour, the
+  /// camera's motion between them as the room's depth measured it (the
+  /// localiser's, same frame; LocalizationResult::depth_camera_motion); the
+  /// frame's depth of the patient is taken at a camera moved by it. Without
+  /// it, by an unknown motion of the camera's recent speed.
+  BodyPoseResult Track(const RgbdFrame& frame, const std::optional<Rigid3d>& hint = std::nullopt,
+                       const DepthCameraMotion* depth_motion = nullptr);
   /// Forgets the last poses: the next frame starts from the stickers alone.
   void Reset();
   /// Whether a frame at time `t` has a prediction from the tracker's own
@@ -244,7 +251,8 @@ class BodyTracker {
   // them); kWholeImage: the whole image, then windows where its first pose
   // puts every sticker.
   enum class Search { kWindows, kNone, kWholeImage };
-  BodyPoseResult TrackOnce(const RgbdFrame& frame, const std::optional<Rigid3d>& hint, Search search);
+  BodyPoseResult TrackOnce(const RgbdFrame& frame, const std::optional<Rigid3d>& hint,
+                           Search search, const DepthCameraMotion* depth_motion);
   struct Impl;
   BodyTrackerOptions options_;
   std::unique_ptr<Impl> impl_;

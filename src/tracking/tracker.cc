@@ -251,7 +251,10 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   if (last_room_from_camera_ && frame.timestamp_s - last_camera_t_ < 0.5) hint = hint_from(*last_room_from_camera_);
   auto run_body = [&] {
     const auto t0 = Clock::now();
-    BodyPoseResult r = body_->Track(frame, hint);
+    const DepthCameraMotion* depth_motion = out.camera.ok && out.camera.depth_camera_motion
+                                                ? &*out.camera.depth_camera_motion
+                                                : nullptr;
+    BodyPoseResult r = body_->Track(frame, hint, depth_motion);
     out.timings.body_ms = MsSince(t0);
     return r;
   };
@@ -276,6 +279,11 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
         out.timings.camera_ms += first_ms;
         out.camera.timings += first_steps;
       }
+    } else if (frame.depth_delay_s != 0 && !frame.depth.empty()) {
+      // Depth of another instant: the body takes the frame's depth at the
+      // camera's motion as the room's depth measured it, so after the camera.
+      out.camera = run_camera();
+      out.body = run_body();
     } else if (options_.parallel) {
       std::future<BodyPoseResult> body = std::async(std::launch::async, run_body);
       out.camera = run_camera();

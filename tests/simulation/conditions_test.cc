@@ -489,17 +489,18 @@ std::string Describe(const SceneConditions& c) {
   s << c.origin_placement << " " << c.origin_surface << " " << c.origin_visibility << " "
     << c.world_from_origin_marker.ToMatrix().format(Eigen::IOFormat(12)) << " " << c.room_marker_size_m << " ";
   for (bool b : c.room_marker_places) s << b;
-  s << " " << c.layout.wall_left_x_m << " " << c.layout.wall_right_x_m << " " << c.layout.wall_foot_y_m << " "
-    << c.layout.wall_head_y_m << " " << c.layout.ceiling_z_m << " " << c.room_walk << " " << c.room_duration_s
-    << " " << c.body_scan_duration_s << " " << c.path_jitter_m << " " << ResponseName(c.response) << " "
-    << c.auto_exposure << " " << c.depth_scale_error << " " << c.depth_field_mm << " " << c.flying_pixels << " "
-    << c.breathing_mm;
+  s << " " << c.layout.wall_left_x_m << " " << c.layout.wall_right_x_m << " "
+    << c.layout.wall_foot_y_m << " " << c.layout.wall_head_y_m << " " << c.layout.ceiling_z_m << " "
+    << c.room_walk << " " << c.room_duration_s << " " << c.body_scan_duration_s << " "
+    << c.path_jitter_m << " " << ResponseName(c.response) << " " << c.auto_exposure << " "
+    << c.depth_scale_error << " " << c.depth_field_mm << " " << c.flying_pixels << " "
+    << c.breathing_mm << " " << c.depth_delay_ms;
   return s.str();
 }
 
 TEST(RandomConditions, DeterministicPerSeedDifferentBetweenSeedsAndVaried) {
   std::set<std::string> described, placements, visibilities, responses, walks;
-  int breathing = 0, biased = 0;
+  int breathing = 0, biased = 0, delayed = 0, later = 0;
   for (uint64_t seed = 1; seed <= 60; ++seed) {
     const SceneConditions a = DrawSceneConditions(seed), b = DrawSceneConditions(seed);
     EXPECT_EQ(Describe(a), Describe(b)) << "seed " << seed;
@@ -523,6 +524,14 @@ TEST(RandomConditions, DeterministicPerSeedDifferentBetweenSeedsAndVaried) {
       EXPECT_GE(a.breathing_mm, 3);
       EXPECT_LE(a.breathing_mm, 6);
     }
+    if (a.depth_delay_ms != 0) {
+      // A camera without colour-depth sync: a few ms either way, within the
+      // pairing window.
+      EXPECT_GE(std::abs(a.depth_delay_ms), 2) << "seed " << seed;
+      EXPECT_LE(std::abs(a.depth_delay_ms), 15) << "seed " << seed;
+      ++delayed;
+      later += a.depth_delay_ms > 0;
+    }
   }
   EXPECT_EQ(described.size(), 60u);
   EXPECT_EQ(placements.size(), 3u);
@@ -531,6 +540,10 @@ TEST(RandomConditions, DeterministicPerSeedDifferentBetweenSeedsAndVaried) {
   EXPECT_EQ(walks.size(), 2u);
   EXPECT_GT(breathing, 20);
   EXPECT_GT(biased, 20);
+  EXPECT_GT(delayed, 12);
+  EXPECT_LT(delayed, 36);
+  EXPECT_GT(later, 0);
+  EXPECT_LT(later, delayed);
 }
 
 // A seed whose drawn origin placement is `placement` (and visibility, if given).
@@ -690,13 +703,17 @@ TEST(RandomConditions, ForcedConditionsOverrideTheDrawnOnesAndLeaveTheRest) {
   const Simulator drawn(o);
   o.response = "linear";
   o.breathing_mm = 0;
+  o.depth_delay_s = 0.007;
   const Simulator forced(o);
   EXPECT_EQ(forced.response(), CameraResponse::kLinear);
   EXPECT_EQ(forced.BreathingDisplacementM(1000.3), 0);
   const SimulationTruth a = drawn.Truth(), b = forced.Truth();
-  EXPECT_EQ(b.Condition("forced"), "[response, breathing_mm]");
+  EXPECT_EQ(b.Condition("forced"), "[response, breathing_mm, depth_delay_ms]");
+  EXPECT_EQ(b.Condition("depth_delay_ms"), "7.0");
+  EXPECT_NEAR(b.depth_delay_s, 0.007, 1e-12);
   for (const auto& [key, value] : a.conditions) {
-    if (key == "response" || key == "breathing_mm" || key == "forced") continue;
+    if (key == "response" || key == "breathing_mm" || key == "depth_delay_ms" || key == "forced")
+      continue;
     EXPECT_EQ(b.Condition(key), value) << key;
   }
 }
