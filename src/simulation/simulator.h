@@ -54,7 +54,8 @@ namespace arpos::sim {
 
 /// Changes whenever the same options and seed render different bytes
 /// (scene, trajectories, sensor models); caches of simulated cases key on it.
-inline constexpr int kSimulatorVersion = 3;
+/// 4: random conditions draw colour-depth sync (depth of another instant).
+inline constexpr int kSimulatorVersion = 4;
 
 struct SimulationOptions {
   std::string profile = "xtion";  ///< xtion | l515 | d435
@@ -92,7 +93,8 @@ struct SimulationOptions {
   /// Depth captured this long after the colour (s; negative: before), as a
   /// camera without hardware sync between its colour and depth sensors
   /// records: each depth image rendered at its own time and listed in
-  /// depth.txt with its own timestamp (0: the same instant).
+  /// depth.txt with its own timestamp (0: the same instant). Unset: drawn
+  /// with random conditions, else 0.
   std::optional<double> depth_delay_s;
   /// Lens distortion of the colour camera (OpenCV k1 k2 p1 p2 k3; the depth
   /// is registered to it): the frames are rendered through it and case.yaml
