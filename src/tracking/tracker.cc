@@ -249,14 +249,18 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
   };
   std::optional<Rigid3d> hint;
   if (last_room_from_camera_ && frame.timestamp_s - last_camera_t_ < 0.5) hint = hint_from(*last_room_from_camera_);
-  auto run_body = [&] {
+  // `depth_motion`: this frame's camera motion between its colour and depth
+  // instants as the localiser measured it (depth of another instant), read
+  // only once the camera is done.
+  auto run_body = [&](const DepthCameraMotion* depth_motion) {
     const auto t0 = Clock::now();
-    const DepthCameraMotion* depth_motion = out.camera.ok && out.camera.depth_camera_motion
-                                                ? &*out.camera.depth_camera_motion
-                                                : nullptr;
     BodyPoseResult r = body_->Track(frame, hint, depth_motion);
     out.timings.body_ms = MsSince(t0);
     return r;
+  };
+  auto measured_motion = [&]() -> const DepthCameraMotion* {
+    return out.camera.ok && out.camera.depth_camera_motion ? &*out.camera.depth_camera_motion
+                                                           : nullptr;
   };
   try {
     if (!hint && !body_->HasRecentPose(frame.timestamp_s)) {
@@ -265,7 +269,7 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       // the body from this frame's camera pose.
       out.camera = run_camera();
       if (out.camera.ok) hint = hint_from(out.camera.room_from_camera);
-      out.body = run_body();
+      out.body = run_body(measured_motion());
       const std::optional<Rigid3d> room_from_model = KnownRoomFromModel(frame.timestamp_s);
       if (!out.camera.ok && out.body.ok && room_from_model) {
         // The room not recognised from scratch, the patient found: the
@@ -283,14 +287,14 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
       // Depth of another instant: the body takes the frame's depth at the
       // camera's motion as the room's depth measured it, so after the camera.
       out.camera = run_camera();
-      out.body = run_body();
+      out.body = run_body(measured_motion());
     } else if (options_.parallel) {
-      std::future<BodyPoseResult> body = std::async(std::launch::async, run_body);
+      std::future<BodyPoseResult> body = std::async(std::launch::async, run_body, nullptr);
       out.camera = run_camera();
       out.body = body.get();
     } else {
       out.camera = run_camera();
-      out.body = run_body();
+      out.body = run_body(measured_motion());
     }
   } catch (const std::exception& e) {
     out.message = std::string("frame could not be processed: ") + e.what();
