@@ -406,25 +406,24 @@ std::string RoomMapBuildReport::ToText() const {
   out << StringPrintf("adjustment: markers %d it %.2f s; joint %d it %.2f s\n",
                       marker_adjustment.iterations, marker_adjustment.seconds,
                       joint_adjustment.iterations, joint_adjustment.seconds);
-  out << StringPrintf(
-      "time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, adjustment %.2f s, total %.2f "
-      "s",
-      frames_s, initialisation_s, landmarks_s, adjustment_s, total_s);
+  out << StringPrintf("time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, ", frames_s,
+                      initialisation_s, landmarks_s)
+      << StringPrintf("adjustment %.2f s, total %.2f s", adjustment_s, total_s);
   if (first_pass_s > 0) out << StringPrintf(" (a first pass %.2f s of it)", first_pass_s);
   out << "\n";
   if (frames_depth_delayed > 0 && frames_depth_moved_to_colour > 0) {
-    out << StringPrintf(
-        "depth of another instant (a median %.1f ms after its colour): read as of the colour's "
-        "instant in %d of "
-        "%d frames, by the camera's motion between the frames around them as a first pass placed "
-        "them\n",
-        1000 * depth_delay_s, frames_depth_moved_to_colour, frames_depth_delayed);
+    out << StringPrintf("depth of another instant (a median %.1f ms after its colour): ",
+                        1000 * depth_delay_s)
+        << StringPrintf("read as of the colour's instant in %d of %d frames, ",
+                        frames_depth_moved_to_colour, frames_depth_delayed)
+        << "by the camera's motion between the frames around them as a first pass placed them\n";
   } else if (frames_depth_delayed > 0) {
-    out << StringPrintf(
-        "depth of another instant (a median %.1f ms after its colour): used as read in all %d "
-        "frames (none has "
-        "a placed frame within %.1f s to take the camera's motion from)\n",
-        1000 * depth_delay_s, frames_depth_delayed, kMaxInterpolationGapS);
+    out << StringPrintf("depth of another instant (a median %.1f ms after its colour): ",
+                        1000 * depth_delay_s)
+        << StringPrintf("used as read in all %d frames ", frames_depth_delayed)
+        << StringPrintf(
+               "(none has a placed frame within %.1f s to take the camera's motion from)\n",
+               kMaxInterpolationGapS);
   }
   out << StringPrintf(
       "room frame (origin marker, %d views): tilt %.4f deg, yaw %.4f deg, position at the couch "
