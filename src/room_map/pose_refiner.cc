@@ -171,8 +171,8 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   Mat6 H, H_prior = Mat6::Zero(), H_marker = Mat6::Zero(), H_depth;
   Vec6 g, g_depth;
   const bool delayed_depth = !corr.depth_motion_covariance.isZero(0);
-  DepthCameraMotion depth_motion;
-  Vec6 last_step = Vec6::Zero();
+  Mat6 H_depth_read = Mat6::Zero();  // the depth's own, before the motion is taken out
+  Vec6 g_depth_read = Vec6::Zero(), last_step = Vec6::Zero();
   for (int it = 0; it < options.max_iterations; ++it) {
     H.setZero();
     H_prior.setZero();
@@ -215,8 +215,8 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
       g_depth.noalias() += w * J * r;
     }
     if (delayed_depth) {
-      depth_motion =
-          MeasuredSharedMotion(corr.depth_motion_covariance, H_depth, g_depth, Vec6::Zero());
+      H_depth_read = H_depth;
+      g_depth_read = g_depth;
       MarginaliseSharedMotion(corr.depth_motion_covariance, &H_depth, &g_depth);
     }
     H += H_depth;
@@ -265,6 +265,8 @@ PoseRefinementResult RefineCameraPose(const PoseCorrespondences& corr,
   result.marker_information = H_marker;
   if (delayed_depth && result.iterations > 0) {
     // Measured at the pose before the last step: relative to the pose after it.
+    DepthCameraMotion depth_motion = MeasuredSharedMotion(corr.depth_motion_covariance,
+                                                          H_depth_read, g_depth_read, Vec6::Zero());
     depth_motion.mean -= last_step;
     result.depth_camera_motion = depth_motion;
   }
