@@ -5,6 +5,7 @@
 #include <opencv2/aruco.hpp>
 #include <sstream>
 
+#include "sensor/yaml_file.h"
 #include "util/check.h"
 #include "util/file.h"
 #include "util/string_util.h"
@@ -193,14 +194,7 @@ std::string ValidateCaseConfig(const CaseConfig& config) {
 }
 
 CaseConfig LoadCaseConfig(const std::filesystem::path& yaml_path) {
-  const std::string text = ReadTextFile(yaml_path);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    ARPOS_INPUT_ERROR(yaml_path.string() << ": not valid YAML (line " << e.mark.line + 1
-                                         << ", column " << e.mark.column + 1 << "): " << e.msg);
-  }
+  const YAML::Node root = LoadYamlFile(yaml_path);
   if (!root.IsMap()) ARPOS_INPUT_ERROR(yaml_path.string() << ": must be a YAML mapping");
   const Reader reader(yaml_path, root);
 

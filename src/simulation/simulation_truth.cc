@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "sensor/yaml_file.h"
 #include "util/check.h"
 #include "util/file.h"
 #include "util/string_util.h"
@@ -218,12 +219,7 @@ void SaveSimulationTruth(const SimulationTruth& t, const std::filesystem::path& 
 
 SimulationTruth LoadSimulationTruth(const std::filesystem::path& path) {
   Reader r{path};
-  YAML::Node root;
-  try {
-    root = YAML::Load(ReadTextFile(path));
-  } catch (const YAML::Exception& e) {
-    ARPOS_INPUT_ERROR(path.string() << ": not valid YAML: " << e.what());
-  }
+  const YAML::Node root = LoadYamlFile(path);
   if (!root.IsMap()) r.Fail("(root)", "expected a mapping");
   if (r.As<std::string>(r.Need(root, "format", ""), "format") != "arpos-simulation-1") {
     r.Fail("format", "expected arpos-simulation-1");

@@ -102,5 +102,22 @@ TEST(CaseConfig, MalformedYamlNamesLine) {
   EXPECT_THROW(LoadCaseConfig(dir.path() / "nope.yaml"), InputError);
 }
 
+// yaml-cpp keeps both values of a repeated key and a lookup takes the first:
+// a corrected size appended below the old one would be ignored in silence.
+TEST(CaseConfig, AKeyGivenTwiceIsRefusedWithBothLines) {
+  const std::string body_twice =
+      Replace(kValidYaml, "    size_m: 0.03\n", "    size_m: 0.03\n    size_m: 0.05\n");
+  const std::string error = LoadError(body_twice);
+  EXPECT_NE(error.find("case.yaml: markers.body.size_m: given twice (lines 17 and 18)"),
+            std::string::npos)
+      << error;
+  const std::string camera_twice = std::string(kValidYaml) + "camera:\n  width: 320\n";
+  EXPECT_NE(LoadError(camera_twice).find("case.yaml: camera: given twice (lines 1 and 19)"),
+            std::string::npos)
+      << LoadError(camera_twice);
+  // The same key in two mappings is not a repeat.
+  EXPECT_EQ(LoadError(kValidYaml), "");
+}
+
 }  // namespace
 }  // namespace arpos
