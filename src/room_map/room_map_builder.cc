@@ -469,18 +469,33 @@ RoomMapBuildResult BuildRoomMap(const Sequence& room, const CaseConfig& config,
                                 const RoomMapBuildOptions& options,
                                 const ControllerCallbacks& callbacks) {
   RoomMapBuildOptions build = options;
-  RoomMapBuildResult first = BuildRoomMapOnce(room, config, build, callbacks);
+  std::vector<double> delays;
+  for (size_t i = 0; i < room.size(); ++i) {
+    if (room.has_depth(i) && room.depth_delay_s(i) != 0) delays.push_back(room.depth_delay_s(i));
+  }
+  const bool two_passes = !delays.empty() && options.colour_from_depth.empty();
+  // Two passes report as one run: the first fills the first half of the
+  // progress, the second the rest (a bar that filled and began again would
+  // read as a restart).
+  const auto pass_callbacks = [&](int pass) {
+    ControllerCallbacks scaled = callbacks;
+    if (two_passes && callbacks.progress) {
+      scaled.progress = [&callbacks, pass](const std::string& step, double fraction) {
+        callbacks.progress(
+            step + (pass == 1 ? " (first pass)" : " (depth read as of its colour instant)"),
+            0.5 * (pass - 1) + 0.5 * fraction);
+      };
+    }
+    return scaled;
+  };
+  RoomMapBuildResult first = BuildRoomMapOnce(room, config, build, pass_callbacks(1));
   // Depth of another instant than its colour (sensor/depth_timing.h): a
   // room walk turns at up to 170 deg/s, so 10 ms moves what the depth saw by
   // centimetres at 3 m, and the adjustment's depth terms pull each frame
   // towards its depth camera; the map is built again with each frame's
   // depth read as of its colour instant, by the camera's motion between the
   // frames around it as this pass placed them.
-  std::vector<double> delays;
-  for (size_t i = 0; i < room.size(); ++i) {
-    if (room.has_depth(i) && room.depth_delay_s(i) != 0) delays.push_back(room.depth_delay_s(i));
-  }
-  if (delays.empty() || !options.colour_from_depth.empty()) return first;
+  if (!two_passes) return first;
   std::vector<std::pair<int, Rigid3d>> posed = first.report.room_from_camera;
   std::sort(posed.begin(), posed.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });
@@ -506,7 +521,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& room, const CaseConfig& config,
     first.report.frames_depth_delayed = static_cast<int>(delays.size());
     return first;
   }
-  RoomMapBuildResult second = BuildRoomMapOnce(room, config, build, callbacks);
+  RoomMapBuildResult second = BuildRoomMapOnce(room, config, build, pass_callbacks(2));
   second.report.depth_delay_s = median_delay_s;
   second.report.frames_depth_delayed = static_cast<int>(delays.size());
   second.report.frames_depth_moved_to_colour = static_cast<int>(build.colour_from_depth.size());
