@@ -248,10 +248,19 @@ void KeypointExtractor::Extract(const cv::Mat& input_gray, const cv::Mat& depth,
       }
     }
   }
-  out->depth_m.resize(chosen.size());
-  for (size_t i = 0; i < chosen.size(); ++i) {
-    out->depth_m[i] = SmoothDepthAt(depth, cvRound(chosen[i].pt.x), cvRound(chosen[i].pt.y),
-                                    depth_scale, options_);
+  ReadDepth(depth, depth_scale, out);
+}
+
+void KeypointExtractor::ReadDepth(const cv::Mat& depth, double depth_scale,
+                                  KeypointSet* set) const {
+  ARPOS_CHECK(set != nullptr, "ReadDepth needs a keypoint set");
+  ARPOS_CHECK(depth.empty() || (depth.type() == CV_16UC1 && depth.cols == set->image_width &&
+                                depth.rows == set->image_height),
+              "depth must be CV_16UC1 of the image's size");
+  set->depth_m.resize(set->keypoints.size());
+  for (size_t i = 0; i < set->keypoints.size(); ++i) {
+    set->depth_m[i] = SmoothDepthAt(depth, cvRound(set->keypoints[i].pt.x),
+                                    cvRound(set->keypoints[i].pt.y), depth_scale, options_);
   }
 }
 

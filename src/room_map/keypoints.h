@@ -94,6 +94,10 @@ class KeypointExtractor {
   /// `gray` CV_8UC1; `depth` CV_16UC1 registered to it (`depth_scale` units
   /// per metre) or empty. Throws arpos::Error for wrong types or sizes.
   void Extract(const cv::Mat& gray, const cv::Mat& depth, double depth_scale, KeypointSet* out);
+  /// The depth of each keypoint of `set` (as Extract reads it) from `depth`
+  /// (CV_16UC1 of the image's size, or empty: no depth); for keypoints found
+  /// before in the same colour image, with other depth.
+  void ReadDepth(const cv::Mat& depth, double depth_scale, KeypointSet* set) const;
   const KeypointOptions& options() const { return options_; }
 
  private:

@@ -459,9 +459,24 @@ std::string RoomMapBuildReport::ToText() const {
 
 namespace {
 
+// What a pass found in the colour images alone, kept for a second pass that
+// reads the same recording's depth otherwise (depth of another instant
+// moved to its colour's): the camera response and, per frame, the markers
+// as detected and the keypoints with their descriptors. The second pass
+// then reads only the depth.
+struct ColourFindings {
+  RecordingResponse response;
+  bool response_estimated = false;  // EstimateRecordingResponse ran
+  std::vector<int> indices;
+  std::vector<std::vector<MarkerObservation>>
+      detected;                        // per frame slot, as the detector gave them
+  std::vector<KeypointSet> keypoints;  // per frame slot, depth not read
+};
+
 RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& config,
                                     const RoomMapBuildOptions& options,
-                                    const ControllerCallbacks& callbacks);
+                                    const ControllerCallbacks& callbacks,
+                                    const ColourFindings* reuse, ColourFindings* keep);
 
 }  // namespace
 
@@ -488,7 +503,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& room, const CaseConfig& config,
     }
     return scaled;
   };
-  RoomMapBuildResult first = BuildRoomMapOnce(room, config, build, pass_callbacks(1));
+  ColourFindings colour;
+  RoomMapBuildResult first = BuildRoomMapOnce(room, config, build, pass_callbacks(1), nullptr,
+                                              two_passes ? &colour : nullptr);
   // Depth of another instant than its colour (sensor/depth_timing.h): a
   // room walk turns at up to 170 deg/s, so 10 ms moves what the depth saw by
   // centimetres at 3 m, and the adjustment's depth terms pull each frame
@@ -521,7 +538,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& room, const CaseConfig& config,
     first.report.frames_depth_delayed = static_cast<int>(delays.size());
     return first;
   }
-  RoomMapBuildResult second = BuildRoomMapOnce(room, config, build, pass_callbacks(2));
+  RoomMapBuildResult second =
+      BuildRoomMapOnce(room, config, build, pass_callbacks(2), &colour, nullptr);
   second.report.depth_delay_s = median_delay_s;
   second.report.frames_depth_delayed = static_cast<int>(delays.size());
   second.report.frames_depth_moved_to_colour = static_cast<int>(build.colour_from_depth.size());
@@ -534,7 +552,8 @@ namespace {
 
 RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& config,
                                     const RoomMapBuildOptions& options,
-                                    const ControllerCallbacks& callbacks) {
+                                    const ControllerCallbacks& callbacks,
+                                    const ColourFindings* reuse, ColourFindings* keep) {
   std::string reason;
   ARPOS_CHECK(options.Check(&reason), "invalid room map options: " << reason);
   const auto t_start = Clock::now();
@@ -560,11 +579,19 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
   // The camera response, from the recording's own markers.
   MarkerDetectorOptions detector_options = options.detector;
   result.map.camera_response = options.detector.edge.response;
+  if (reuse)
+    ARPOS_CHECK(reuse->indices == indices, "a second pass over other frames than the first");
   if (options.estimate_response) {
     progress("estimating the camera response", 0.0);
-    const RecordingResponse rr = EstimateRecordingResponse(sequence, K, options.detector,
-                                                           options.detector.edge.response,
-                                                           options.response);
+    const RecordingResponse rr =
+        reuse && reuse->response_estimated
+            ? reuse->response
+            : EstimateRecordingResponse(sequence, K, options.detector,
+                                        options.detector.edge.response, options.response);
+    if (keep) {
+      keep->response = rr;
+      keep->response_estimated = true;
+    }
     detector_options.edge.response = rr.response;
     result.map.camera_response = rr.response;
     report.camera_response = rr.message;
@@ -585,6 +612,11 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
   }
 
   std::vector<FrameData> frames(indices.size());
+  if (keep) {
+    keep->indices = indices;
+    keep->detected.assign(indices.size(), {});
+    keep->keypoints.assign(indices.size(), {});
+  }
   // Where the room planes' depth is read: about 80 samples across the image.
   const DepthSampleGrid plane_grid =
       options.use_room_planes ? MakeDepthSampleGrid(K, std::max(8, K.width / 80)) : DepthSampleGrid{};
@@ -618,7 +650,12 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
               f.grid_z[i] = static_cast<float>(frame.depth.at<uint16_t>(plane_grid.px[i]) / K.depth_scale);
             }
           }
-          detector.Detect(gray, &detected);
+          if (reuse) {
+            detected = reuse->detected[slot];
+          } else {
+            detector.Detect(gray, &detected);
+          }
+          if (keep) keep->detected[slot] = detected;
           for (const auto& obs : detected) {
             f.all_ids_seen.push_back(obs.id);
             if (!obs.IsPrecise()) continue;
@@ -640,7 +677,13 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
             }
           }
           if (options.use_keypoints) {
-            extractor.Extract(gray, frame.depth, K.depth_scale, &f.keypoints);
+            if (reuse) {
+              f.keypoints = reuse->keypoints[slot];
+              extractor.ReadDepth(frame.depth, K.depth_scale, &f.keypoints);
+            } else {
+              extractor.Extract(gray, frame.depth, K.depth_scale, &f.keypoints);
+            }
+            if (keep) keep->keypoints[slot] = f.keypoints;
             std::vector<Eigen::Vector2d> px;
             px.reserve(f.keypoints.size());
             for (const auto& kp : f.keypoints.keypoints) px.emplace_back(kp.pt.x, kp.pt.y);
