@@ -42,6 +42,8 @@ double SecondsSince(Clock::time_point t) {
 struct FrameData {
   int index = -1;
   std::vector<MarkerObservation> markers;  // kRefined room markers, corners undistorted
+  std::vector<std::array<Eigen::Vector2d, 4>>
+      image_corners_px;                    // parallel: as detected (distorted)
   std::vector<MarkerPose> poses;           // parallel
   std::vector<std::vector<DepthSample>> depth_samples;  // parallel
   std::vector<std::vector<DepthSample>> support_samples;  // parallel; the origin's only
@@ -311,6 +313,8 @@ std::string RoomMapBuildOptions::Validate() const {
   else if (!keypoints.Check(&r)) out << "keypoints: " << r;
   else if (!bundle_adjustment.Check(&r)) out << "bundle_adjustment: " << r;
   else if (frame_step < 1) out << "frame_step must be at least 1, got " << frame_step;
+  else if (delayed_depth_pose_iterations < 1)
+    out << "delayed_depth_pose_iterations must be at least 1";
   else if (max_frames < 0) out << "max_frames must not be negative";
   else if (threads < 1 || adjustment_threads < 1)
     out << "threads must be at least 1";
@@ -409,14 +413,17 @@ std::string RoomMapBuildReport::ToText() const {
   out << StringPrintf("time: frames %.2f s, initialisation %.2f s, landmarks %.2f s, ", frames_s,
                       initialisation_s, landmarks_s)
       << StringPrintf("adjustment %.2f s, total %.2f s", adjustment_s, total_s);
-  if (first_pass_s > 0) out << StringPrintf(" (a first pass %.2f s of it)", first_pass_s);
+  if (frames_depth_moved_to_colour > 0) {
+    out << StringPrintf(" (depth read again as of the colour's instant %.2f s of it)",
+                        depth_move_s);
+  }
   out << "\n";
   if (frames_depth_delayed > 0 && frames_depth_moved_to_colour > 0) {
     out << StringPrintf("depth of another instant (a median %.1f ms after its colour): ",
                         1000 * depth_delay_s)
         << StringPrintf("read as of the colour's instant in %d of %d frames, ",
                         frames_depth_moved_to_colour, frames_depth_delayed)
-        << "by the camera's motion between the frames around them as a first pass placed them\n";
+        << "by the camera's motion between the frames placed around them\n";
   } else if (frames_depth_delayed > 0) {
     out << StringPrintf("depth of another instant (a median %.1f ms after its colour): ",
                         1000 * depth_delay_s)
@@ -457,103 +464,9 @@ std::string RoomMapBuildReport::ToText() const {
   return out.str();
 }
 
-namespace {
-
-// What a pass found in the colour images alone, kept for a second pass that
-// reads the same recording's depth otherwise (depth of another instant
-// moved to its colour's): the camera response and, per frame, the markers
-// as detected and the keypoints with their descriptors. The second pass
-// then reads only the depth.
-struct ColourFindings {
-  RecordingResponse response;
-  bool response_estimated = false;  // EstimateRecordingResponse ran
-  std::vector<int> indices;
-  std::vector<std::vector<MarkerObservation>>
-      detected;                        // per frame slot, as the detector gave them
-  std::vector<KeypointSet> keypoints;  // per frame slot, depth not read
-};
-
-RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& config,
-                                    const RoomMapBuildOptions& options,
-                                    const ControllerCallbacks& callbacks,
-                                    const ColourFindings* reuse, ColourFindings* keep);
-
-}  // namespace
-
-RoomMapBuildResult BuildRoomMap(const Sequence& room, const CaseConfig& config,
+RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& config,
                                 const RoomMapBuildOptions& options,
                                 const ControllerCallbacks& callbacks) {
-  RoomMapBuildOptions build = options;
-  std::vector<double> delays;
-  for (size_t i = 0; i < room.size(); ++i) {
-    if (room.has_depth(i) && room.depth_delay_s(i) != 0) delays.push_back(room.depth_delay_s(i));
-  }
-  const bool two_passes = !delays.empty() && options.colour_from_depth.empty();
-  // Two passes report as one run: the first fills the first half of the
-  // progress, the second the rest (a bar that filled and began again would
-  // read as a restart).
-  const auto pass_callbacks = [&](int pass) {
-    ControllerCallbacks scaled = callbacks;
-    if (two_passes && callbacks.progress) {
-      scaled.progress = [&callbacks, pass](const std::string& step, double fraction) {
-        callbacks.progress(
-            step + (pass == 1 ? " (first pass)" : " (depth read as of its colour instant)"),
-            0.5 * (pass - 1) + 0.5 * fraction);
-      };
-    }
-    return scaled;
-  };
-  ColourFindings colour;
-  RoomMapBuildResult first = BuildRoomMapOnce(room, config, build, pass_callbacks(1), nullptr,
-                                              two_passes ? &colour : nullptr);
-  // Depth of another instant than its colour (sensor/depth_timing.h): a
-  // room walk turns at up to 170 deg/s, so 10 ms moves what the depth saw by
-  // centimetres at 3 m, and the adjustment's depth terms pull each frame
-  // towards its depth camera; the map is built again with each frame's
-  // depth read as of its colour instant, by the camera's motion between the
-  // frames around it as this pass placed them.
-  if (!two_passes) return first;
-  std::vector<std::pair<int, Rigid3d>> posed = first.report.room_from_camera;
-  std::sort(posed.begin(), posed.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<double> times;
-  std::vector<Rigid3d> poses;
-  for (const auto& [index, pose] : posed) {
-    times.push_back(room.timestamp_s(index));
-    poses.push_back(pose);
-  }
-  for (size_t k = 0; k < posed.size(); ++k) {
-    const int index = posed[k].first;
-    if (!room.has_depth(index) || room.depth_delay_s(index) == 0) continue;
-    if (const std::optional<Rigid3d> m =
-            ColourFromDepthCamera(times, poses, k, room.depth_delay_s(index))) {
-      build.colour_from_depth[index] = *m;
-    }
-  }
-  std::nth_element(delays.begin(), delays.begin() + delays.size() / 2, delays.end());
-  const double median_delay_s = delays[delays.size() / 2];
-  if (build.colour_from_depth.empty()) {
-    // No posed frame with a posed neighbour within reach: as it was read.
-    first.report.depth_delay_s = median_delay_s;
-    first.report.frames_depth_delayed = static_cast<int>(delays.size());
-    return first;
-  }
-  RoomMapBuildResult second =
-      BuildRoomMapOnce(room, config, build, pass_callbacks(2), &colour, nullptr);
-  second.report.depth_delay_s = median_delay_s;
-  second.report.frames_depth_delayed = static_cast<int>(delays.size());
-  second.report.frames_depth_moved_to_colour = static_cast<int>(build.colour_from_depth.size());
-  second.report.first_pass_s = first.report.total_s;
-  second.report.total_s += first.report.total_s;
-  return second;
-}
-
-namespace {
-
-RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& config,
-                                    const RoomMapBuildOptions& options,
-                                    const ControllerCallbacks& callbacks,
-                                    const ColourFindings* reuse, ColourFindings* keep) {
   std::string reason;
   ARPOS_CHECK(options.Check(&reason), "invalid room map options: " << reason);
   const auto t_start = Clock::now();
@@ -579,19 +492,10 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
   // The camera response, from the recording's own markers.
   MarkerDetectorOptions detector_options = options.detector;
   result.map.camera_response = options.detector.edge.response;
-  if (reuse)
-    ARPOS_CHECK(reuse->indices == indices, "a second pass over other frames than the first");
   if (options.estimate_response) {
     progress("estimating the camera response", 0.0);
-    const RecordingResponse rr =
-        reuse && reuse->response_estimated
-            ? reuse->response
-            : EstimateRecordingResponse(sequence, K, options.detector,
-                                        options.detector.edge.response, options.response);
-    if (keep) {
-      keep->response = rr;
-      keep->response_estimated = true;
-    }
+    const RecordingResponse rr = EstimateRecordingResponse(
+        sequence, K, options.detector, options.detector.edge.response, options.response);
     detector_options.edge.response = rr.response;
     result.map.camera_response = rr.response;
     report.camera_response = rr.message;
@@ -612,11 +516,6 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
   }
 
   std::vector<FrameData> frames(indices.size());
-  if (keep) {
-    keep->indices = indices;
-    keep->detected.assign(indices.size(), {});
-    keep->keypoints.assign(indices.size(), {});
-  }
   // Where the room planes' depth is read: about 80 samples across the image.
   const DepthSampleGrid plane_grid =
       options.use_room_planes ? MakeDepthSampleGrid(K, std::max(8, K.width / 80)) : DepthSampleGrid{};
@@ -638,11 +537,6 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
           FrameData& f = frames[slot];
           f.index = indices[slot];
           RgbdFrame frame = sequence.LoadFrame(f.index, K);
-          if (const auto moved = options.colour_from_depth.find(f.index);
-              moved != options.colour_from_depth.end() && !frame.depth.empty()) {
-            frame.depth = DepthAtColourInstant(frame.depth, K.depth_scale, K.fx, K.fy, K.cx, K.cy,
-                                               moved->second);
-          }
           cv::cvtColor(frame.color, gray, cv::COLOR_BGR2GRAY);
           if (!plane_grid.px.empty() && !frame.depth.empty()) {
             f.grid_z.resize(plane_grid.px.size());
@@ -650,12 +544,7 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
               f.grid_z[i] = static_cast<float>(frame.depth.at<uint16_t>(plane_grid.px[i]) / K.depth_scale);
             }
           }
-          if (reuse) {
-            detected = reuse->detected[slot];
-          } else {
-            detector.Detect(gray, &detected);
-          }
-          if (keep) keep->detected[slot] = detected;
+          detector.Detect(gray, &detected);
           for (const auto& obs : detected) {
             f.all_ids_seen.push_back(obs.id);
             if (!obs.IsPrecise()) continue;
@@ -667,6 +556,7 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
                 IdealPixels({obs.corners_px.begin(), obs.corners_px.end()}, K);
             for (int k = 0; k < 4; ++k) ideal.corners_px[k] = c[k];
             f.markers.push_back(ideal);
+            f.image_corners_px.push_back(obs.corners_px);
             f.poses.push_back(pose);
             f.depth_samples.push_back(std::move(samples));
             f.support_samples.emplace_back();
@@ -677,13 +567,7 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
             }
           }
           if (options.use_keypoints) {
-            if (reuse) {
-              f.keypoints = reuse->keypoints[slot];
-              extractor.ReadDepth(frame.depth, K.depth_scale, &f.keypoints);
-            } else {
-              extractor.Extract(gray, frame.depth, K.depth_scale, &f.keypoints);
-            }
-            if (keep) keep->keypoints[slot] = f.keypoints;
+            extractor.Extract(gray, frame.depth, K.depth_scale, &f.keypoints);
             std::vector<Eigen::Vector2d> px;
             px.reserve(f.keypoints.size());
             for (const auto& kp : f.keypoints.keypoints) px.emplace_back(kp.pt.x, kp.pt.y);
@@ -1400,6 +1284,121 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
   collect_marker_observations();
   ba.landmarks_in_room = landmarks;
   ba.keypoint_observations = keypoint_observations;
+  // Depth of another instant than its colour (sensor/depth_timing.h): a
+  // room walk turns at up to 170 deg/s, so 10 ms moves what the depth saw by
+  // centimetres at 3 m, and the adjustment's depth terms would pull each
+  // frame towards its depth camera. Every frame the map places is placed by
+  // now (markers, then keypoints): each delayed frame's depth is read again
+  // as of its colour instant, by the camera's motion between the frames
+  // placed around it (as the markers and keypoints alone adjust them),
+  // before depth enters the adjustment and the checks.
+  std::map<int, Rigid3d> colour_from_depth;  // sequence index -> the camera's motion over the delay
+  {
+    const auto t_move = Clock::now();
+    std::vector<double> delays;
+    for (const FrameData& f : frames) {
+      if (sequence.has_depth(f.index) && sequence.depth_delay_s(f.index) != 0) {
+        delays.push_back(sequence.depth_delay_s(f.index));
+      }
+    }
+    if (!delays.empty()) {
+      std::nth_element(delays.begin(), delays.begin() + delays.size() / 2, delays.end());
+      report.depth_delay_s = delays[delays.size() / 2];
+      report.frames_depth_delayed = static_cast<int>(delays.size());
+    }
+    if (!delays.empty() && options.move_delayed_depth) {
+      std::vector<size_t> posed;  // frame slots in time order
+      for (size_t s = 0; s < frames.size(); ++s) {
+        if (camera_slot[s] >= 0) posed.push_back(s);
+      }
+      std::sort(posed.begin(), posed.end(), [&](size_t a, size_t b) {
+        return sequence.timestamp_s(frames[a].index) < sequence.timestamp_s(frames[b].index);
+      });
+      // The poses to take the motion from: the markers and keypoints alone
+      // adjusted (the depth as read would pull each frame towards its depth
+      // camera; the poses before any joint adjustment, by markers or by
+      // keypoints frame by frame, moved the depth by their own noise: the
+      // map near the couch 5.9 mm off on a 240-frame room where moving it by
+      // adjusted poses gave 2.9).
+      BaProblem colour_only = ba;
+      BaOptions colour_options = options.bundle_adjustment;
+      colour_options.use_marker_depth = colour_options.use_keypoint_depth =
+          colour_options.use_plane_depth = false;
+      colour_options.threads = options.adjustment_threads;
+      colour_options.max_iterations = options.delayed_depth_pose_iterations;
+      colour_options.covariance_markers.clear();
+      const BaSummary colour_summary = RunBundleAdjustment(&colour_only, colour_options);
+      std::vector<Rigid3d> camera_from_room(frames.size());
+      for (size_t s = 0; s < frames.size(); ++s) camera_from_room[s] = frames[s].camera_from_room;
+      if (colour_summary.usable) {
+        for (size_t c = 0; c < camera_frame.size(); ++c)
+          camera_from_room[camera_frame[c]] = colour_only.camera_from_room[c];
+      }
+      std::vector<double> times;
+      std::vector<Rigid3d> room_from_camera;
+      for (size_t s : posed) {
+        times.push_back(sequence.timestamp_s(frames[s].index));
+        room_from_camera.push_back(camera_from_room[s].Inverse());
+      }
+      std::vector<std::pair<size_t, Rigid3d>> to_move;  // frame slot, colour_from_depth
+      for (size_t k = 0; k < posed.size(); ++k) {
+        const int index = frames[posed[k]].index;
+        if (!sequence.has_depth(index) || sequence.depth_delay_s(index) == 0) continue;
+        if (const std::optional<Rigid3d> m =
+                ColourFromDepthCamera(times, room_from_camera, k, sequence.depth_delay_s(index))) {
+          to_move.emplace_back(posed[k], *m);
+          colour_from_depth[index] = *m;
+        }
+      }
+      std::atomic<size_t> next{0};
+      std::exception_ptr error;
+      std::mutex error_mutex;
+      auto worker = [&]() {
+        try {
+          const KeypointExtractor extractor(options.keypoints);
+          for (size_t j = next++; j < to_move.size(); j = next++) {
+            FrameData& f = frames[to_move[j].first];
+            const cv::Mat depth =
+                DepthAtColourInstant(sequence.LoadDepth(f.index, K), K.depth_scale, K.fx, K.fy,
+                                     K.cx, K.cy, to_move[j].second);
+            if (!f.grid_z.empty()) {
+              for (size_t i = 0; i < plane_grid.px.size(); ++i) {
+                f.grid_z[i] =
+                    static_cast<float>(depth.at<uint16_t>(plane_grid.px[i]) / K.depth_scale);
+              }
+            }
+            for (size_t m = 0; m < f.markers.size(); ++m) {
+              f.depth_samples[m] =
+                  SampleMarkerDepth(depth, f.image_corners_px[m], K, options.marker_depth_samples);
+              if (f.markers[m].id == origin_id) {
+                f.support_samples[m] = SampleSupportDepth(
+                    depth, f.image_corners_px[m], K, marker_size,
+                    options.support_plane_half_width_m, options.support_plane_samples);
+              }
+            }
+            if (options.use_keypoints) extractor.ReadDepth(depth, K.depth_scale, &f.keypoints);
+          }
+        } catch (...) {
+          std::lock_guard<std::mutex> lock(error_mutex);
+          if (!error) error = std::current_exception();
+          next = to_move.size();
+        }
+      };
+      std::vector<std::thread> workers;
+      for (int t = 0; t < std::max(1, options.threads); ++t) workers.emplace_back(worker);
+      for (auto& w : workers) w.join();
+      if (error) std::rethrow_exception(error);
+      // The landmarks' observations carry their keypoint's depth.
+      for (size_t k = 0; k < keypoint_observations.size(); ++k) {
+        const auto& [slot, i] = keypoint_source[k];
+        keypoint_observations[k].depth_m = frames[slot].keypoints.depth_m[i];
+      }
+      report.frames_depth_moved_to_colour = static_cast<int>(to_move.size());
+      collect_marker_observations();
+      ba.keypoint_observations = keypoint_observations;
+    }
+    report.depth_move_s = SecondsSince(t_move);
+  }
   BaOptions joint_options = options.bundle_adjustment;
   joint_options.threads = options.adjustment_threads;
   if (options.estimate_depth_correction) {
@@ -2077,8 +2076,7 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
     // Depth read as of its colour instant: the depth camera's own pose.
     std::vector<std::pair<int, Rigid3d>> depth_cameras = report.room_from_camera;
     for (auto& [index, pose] : depth_cameras) {
-      if (const auto moved = options.colour_from_depth.find(index);
-          moved != options.colour_from_depth.end()) {
+      if (const auto moved = colour_from_depth.find(index); moved != colour_from_depth.end()) {
         pose = pose * moved->second;
       }
     }
@@ -2096,5 +2094,4 @@ RoomMapBuildResult BuildRoomMapOnce(const Sequence& sequence, const CaseConfig& 
   return result;
 }
 
-}  // namespace
 }  // namespace arpos

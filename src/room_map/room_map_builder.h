@@ -61,12 +61,16 @@ std::optional<int> SolutionBySupportDepth(const MarkerPose& pose,
                                           const CameraIntrinsics& K, const BaOptions& ba_options);
 
 struct RoomMapBuildOptions {
-  /// Depth of another instant than its colour (sensor/depth_timing.h), a
-  /// second pass: frame (sequence index) -> the camera's motion from its
-  /// colour instant to its depth's (colour_from_depth camera), from the
-  /// first pass's poses; each such frame's depth is read as of its colour
-  /// instant (DepthAtColourInstant), the room surface likewise.
-  std::map<int, Rigid3d> colour_from_depth;
+  /// Depth of another instant than its colour (sensor/depth_timing.h): once
+  /// every frame is placed (markers, then keypoints), each such frame's
+  /// depth is read again as of its colour instant (DepthAtColourInstant) by
+  /// the camera's motion between the frames placed around it
+  /// (ColourFromDepthCamera), before depth enters the adjustment; the room
+  /// surface likewise. Off: used as read.
+  bool move_delayed_depth = true;
+  /// The poses that motion is taken from: the markers and keypoints alone
+  /// adjusted, at most this many iterations.
+  int delayed_depth_pose_iterations = 10;
 
   /// Room-marker detection; dictionary and id range are taken from the case
   /// by MakeRoomMapBuildOptions.
@@ -348,11 +352,11 @@ struct RoomMapBuildReport {
   /// Camera poses of the used frames (sequence index, room_from_camera).
   std::vector<std::pair<int, Rigid3d>> room_from_camera;
   /// Depth of another instant than its colour: the median delay (s) and the
-  /// frames whose depth was read as of its colour instant (a second pass,
-  /// RoomMapBuildOptions::colour_from_depth), of those with delayed depth.
+  /// frames whose depth was read as of its colour instant
+  /// (RoomMapBuildOptions::move_delayed_depth), of those with delayed depth.
   double depth_delay_s = 0;
   int frames_depth_moved_to_colour = 0, frames_depth_delayed = 0;
-  double first_pass_s = 0;  ///< the first pass's time, included in total_s
+  double depth_move_s = 0;  ///< reading that depth again, included in adjustment_s and total_s
 
   std::string ToText() const;
 };
@@ -363,10 +367,8 @@ struct RoomMapBuildResult {
 };
 
 /// Builds the map of `sequence` (the room/ folder of a case with `config`).
-/// Depth of another instant than its colour: built twice, the second time
-/// with each frame's depth read as of its colour instant by the camera's
-/// motion between the frames around it as the first placed them
-/// (RoomMapBuildOptions::colour_from_depth, unless given).
+/// Depth of another instant than its colour: read as of its colour instant
+/// (RoomMapBuildOptions::move_delayed_depth).
 /// Throws InputError naming the file for unreadable frames, and when the
 /// origin marker is never seen (the room frame would be undefined) or no
 /// usable marker is found; Cancelled if `callbacks.cancel_requested` says so.

@@ -135,6 +135,19 @@ RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intri
   return frame;
 }
 
+cv::Mat Sequence::LoadDepth(size_t i, const CameraIntrinsics& intrinsics) const {
+  ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
+  if (frames_[i].depth.empty()) {
+    ARPOS_INPUT_ERROR(color_path(i).string()
+                      << ": no depth image within " << StringPrintf("%.3f", kFrameAssociationS)
+                      << " s in depth.txt");
+  }
+  std::string problem;
+  cv::Mat depth = ReadDepth(depth_path(i), intrinsics, &problem);
+  if (!problem.empty()) ARPOS_INPUT_ERROR(problem);
+  return depth;
+}
+
 RgbdFrame Sequence::LoadFrame(size_t i, const CameraIntrinsics& intrinsics) const {
   ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
   std::string depth_problem;

@@ -50,6 +50,9 @@ class Sequence {
   /// Frame i's colour image alone (BGR, CV_8UC3), checked as LoadFrame checks
   /// it (InputError naming the file); the depth image is not read.
   cv::Mat LoadColour(size_t i, const CameraIntrinsics& intrinsics) const;
+  /// Frame i's depth image alone (CV_16UC1), checked as LoadFrame checks it
+  /// (InputError naming the file, or the frame when depth.txt lists none).
+  cv::Mat LoadDepth(size_t i, const CameraIntrinsics& intrinsics) const;
 
   /// groundtruth.txt / body_groundtruth.txt if present.
   std::optional<std::vector<StampedPose>> CameraGroundTruth() const;
