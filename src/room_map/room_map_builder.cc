@@ -1247,7 +1247,14 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
 
   // ---------------------------------------------------------------- 4. joint adjustment
   const auto t_adjust = Clock::now();
-  progress("bundle adjustment", 0.7);
+  const bool depth_to_move =
+      options.move_delayed_depth &&
+      std::any_of(frames.begin(), frames.end(), [&](const FrameData& f) {
+        return sequence.has_depth(f.index) && sequence.depth_delay_s(f.index) != 0;
+      });
+  progress(depth_to_move ? "reading the depth again as of each frame's colour instant"
+                         : "bundle adjustment",
+           0.7);
   rebuild_cameras();
   if (!marker_slot.count(origin_id)) {
     const std::optional<Rigid3d> origin = place_from_views(origin_id);
@@ -1398,6 +1405,7 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       ba.keypoint_observations = keypoint_observations;
     }
     report.depth_move_s = SecondsSince(t_move);
+    if (depth_to_move) progress("bundle adjustment", 0.75);
   }
   BaOptions joint_options = options.bundle_adjustment;
   joint_options.threads = options.adjustment_threads;
