@@ -1322,11 +1322,11 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
         return sequence.timestamp_s(frames[a].index) < sequence.timestamp_s(frames[b].index);
       });
       // The poses to take the motion from: the markers and keypoints alone
-      // adjusted (the depth as read would pull each frame towards its depth
-      // camera; the poses before any joint adjustment, by markers or by
-      // keypoints frame by frame, moved the depth by their own noise: the
-      // map near the couch 5.9 mm off on a 240-frame room where moving it by
-      // adjusted poses gave 2.9).
+      // adjusted, without depth terms (the depth as read would pull each
+      // frame towards its depth camera). Against building the whole map
+      // twice (the second time from the first's adjusted poses): maps near
+      // the couch as good on balance over 22 delayed rooms, in half the
+      // time (benchmark/accuracy.md, session 44).
       BaProblem colour_only = ba;
       BaOptions colour_options = options.bundle_adjustment;
       colour_options.use_marker_depth = colour_options.use_keypoint_depth =
