@@ -9,8 +9,8 @@
 namespace arpos {
 namespace {
 
-// The first key given twice in a mapping, depth first, as "a.b (lines 3 and
-// 7)"; empty when none is.
+// The first key given twice in one mapping, depth first, said as
+// "a.b: given twice (lines 3 and 7); keep one"; empty when none is.
 std::string RepeatedKey(const YAML::Node& node, const std::string& prefix) {
   if (node.IsSequence()) {
     for (size_t i = 0; i < node.size(); ++i) {
