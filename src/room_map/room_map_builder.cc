@@ -1247,11 +1247,13 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
 
   // ---------------------------------------------------------------- 4. joint adjustment
   const auto t_adjust = Clock::now();
-  const bool depth_to_move =
-      options.move_delayed_depth &&
-      std::any_of(frames.begin(), frames.end(), [&](const FrameData& f) {
-        return sequence.has_depth(f.index) && sequence.depth_delay_s(f.index) != 0;
-      });
+  std::vector<double> delays;  // of the frames whose depth is of another instant
+  for (const FrameData& f : frames) {
+    if (sequence.has_depth(f.index) && sequence.depth_delay_s(f.index) != 0) {
+      delays.push_back(sequence.depth_delay_s(f.index));
+    }
+  }
+  const bool depth_to_move = options.move_delayed_depth && !delays.empty();
   progress(depth_to_move ? "reading the depth again as of each frame's colour instant"
                          : "bundle adjustment",
            0.7);
@@ -1302,18 +1304,12 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   std::map<int, Rigid3d> colour_from_depth;  // sequence index -> the camera's motion over the delay
   {
     const auto t_move = Clock::now();
-    std::vector<double> delays;
-    for (const FrameData& f : frames) {
-      if (sequence.has_depth(f.index) && sequence.depth_delay_s(f.index) != 0) {
-        delays.push_back(sequence.depth_delay_s(f.index));
-      }
-    }
     if (!delays.empty()) {
       std::nth_element(delays.begin(), delays.begin() + delays.size() / 2, delays.end());
       report.depth_delay_s = delays[delays.size() / 2];
       report.frames_depth_delayed = static_cast<int>(delays.size());
     }
-    if (!delays.empty() && options.move_delayed_depth) {
+    if (depth_to_move) {
       std::vector<size_t> posed;  // frame slots in time order
       for (size_t s = 0; s < frames.size(); ++s) {
         if (camera_slot[s] >= 0) posed.push_back(s);
@@ -1335,17 +1331,14 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       colour_options.max_iterations = options.delayed_depth_pose_iterations;
       colour_options.covariance_markers.clear();
       const BaSummary colour_summary = RunBundleAdjustment(&colour_only, colour_options);
-      std::vector<Rigid3d> camera_from_room(frames.size());
-      for (size_t s = 0; s < frames.size(); ++s) camera_from_room[s] = frames[s].camera_from_room;
-      if (colour_summary.usable) {
-        for (size_t c = 0; c < camera_frame.size(); ++c)
-          camera_from_room[camera_frame[c]] = colour_only.camera_from_room[c];
-      }
       std::vector<double> times;
       std::vector<Rigid3d> room_from_camera;
       for (size_t s : posed) {
         times.push_back(sequence.timestamp_s(frames[s].index));
-        room_from_camera.push_back(camera_from_room[s].Inverse());
+        room_from_camera.push_back((colour_summary.usable
+                                        ? colour_only.camera_from_room[camera_slot[s]]
+                                        : frames[s].camera_from_room)
+                                       .Inverse());
       }
       std::vector<std::pair<size_t, Rigid3d>> to_move;  // frame slot, colour_from_depth
       for (size_t k = 0; k < posed.size(); ++k) {
@@ -1403,9 +1396,9 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
       report.frames_depth_moved_to_colour = static_cast<int>(to_move.size());
       collect_marker_observations();
       ba.keypoint_observations = keypoint_observations;
+      report.depth_move_s = SecondsSince(t_move);
+      progress("bundle adjustment", 0.75);
     }
-    report.depth_move_s = SecondsSince(t_move);
-    if (depth_to_move) progress("bundle adjustment", 0.75);
   }
   BaOptions joint_options = options.bundle_adjustment;
   joint_options.threads = options.adjustment_threads;

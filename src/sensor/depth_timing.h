@@ -100,8 +100,9 @@ std::optional<Rigid3d> ColourFromDepthCamera(const std::vector<double>& times_s,
                                              double delay_s);
 
 /// A recording whose frames are placed before its depth is used (the plan:
-/// from its markers and keypoints): a depth image (CV_16UC1, `depth_scale` units per metre) of a
-/// camera at `colour_from_depth` from its colour camera, as the colour camera
+/// from its markers and keypoints): a depth image (CV_16UC1, `depth_scale`
+/// units per metre) of a camera at `colour_from_depth` from its colour
+/// camera, as the colour camera
 /// would have read it. Each pixel's reading is taken where the depth camera
 /// saw that pixel's point (two fixed-point steps from the pixel's own
 /// reading, nearest pixel) and given as its z in the colour camera; 0 where

@@ -64,6 +64,11 @@ Sequence Sequence::OpenImpl(const std::filesystem::path& folder, bool every_colo
 
 namespace {
 // The depth image of a frame, or empty with the reason.
+// A colour image depth.txt pairs with no depth image.
+std::string NoDepthListed() {
+  return "no depth image within " + StringPrintf("%.3f", kFrameAssociationS) + " s in depth.txt";
+}
+
 cv::Mat ReadDepth(const std::filesystem::path& depth_file, const CameraIntrinsics& intrinsics, std::string* problem) {
   if (!std::filesystem::exists(depth_file)) {
     *problem = depth_file.string() + ": missing depth image";
@@ -127,7 +132,7 @@ RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intri
   frame.depth_scale = intrinsics.depth_scale;
   frame.color = LoadColour(i, intrinsics);
   if (frames_[i].depth.empty()) {
-    *depth_problem = "no depth image within " + StringPrintf("%.3f", kFrameAssociationS) + " s in depth.txt";
+    *depth_problem = NoDepthListed();
   } else {
     frame.depth = ReadDepth(depth_path(i), intrinsics, depth_problem);
     if (!frame.depth.empty()) frame.depth_delay_s = frames_[i].depth_delay_s;
@@ -138,9 +143,7 @@ RgbdFrame Sequence::LoadFrameColourFirst(size_t i, const CameraIntrinsics& intri
 cv::Mat Sequence::LoadDepth(size_t i, const CameraIntrinsics& intrinsics) const {
   ARPOS_CHECK(i < frames_.size(), "frame " << i << " out of range (" << frames_.size() << ")");
   if (frames_[i].depth.empty()) {
-    ARPOS_INPUT_ERROR(color_path(i).string()
-                      << ": no depth image within " << StringPrintf("%.3f", kFrameAssociationS)
-                      << " s in depth.txt");
+    ARPOS_INPUT_ERROR(color_path(i).string() << ": " << NoDepthListed());
   }
   std::string problem;
   cv::Mat depth = ReadDepth(depth_path(i), intrinsics, &problem);
