@@ -196,6 +196,12 @@ std::string SessionStageResult::Summary() const {
                         "the stickers\n",
                         surface_offset_frames, 1000 * surface_offset_shift_m.norm());
   }
+  if (frames_depth_moved_to_colour > 0) {
+    out << StringPrintf(
+        "depth of another instant than its colour: moved to the colour instant in %d frame(s); "
+        "%d room-localised frame(s) localised again with it\n",
+        frames_depth_moved_to_colour, frames_relocalised_with_moved_depth);
+  }
   out << RoomPlacementText() << "\n";
   if (scan_landmarks.frames > 0) {
     out << StringPrintf("room landmarks the scan sees, for tracking: %d new to the room map ",
@@ -390,6 +396,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   // 1. Every considered frame: room localisation, stickers, and the depth
   //    cloud of reconstruction frames.
   struct ScanFrame {
+    size_t index = 0;  ///< in the scan
     double timestamp_s = 0;
     bool localized = false;
     Rigid3d room_from_camera;  ///< the room map's pose (when localized)
@@ -426,6 +433,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     const LocalizationResult located = localizer.Localize(frame);
     t_localize += SecondsSince(t0);
     ScanFrame f;
+    f.index = i;
     f.timestamp_s = frame.timestamp_s;
     f.localized = located.ok;
     f.room_from_camera = located.room_from_camera;
@@ -548,6 +556,72 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     result.marker_map = BuildBodyMarkerMap(views_of(false), camera, map_options);
   }
   t_markers += SecondsSince(t0);
+
+  // 2b. Depth of another instant than its colour: the room-localised frames
+  //     localised again with their depth as of their colour instant, by the
+  //     camera's motion between the posed frames around them (the stickers
+  //     pose them consistently), and the room poses they give replace the
+  //     first ones; the scan's placement from them (again in step 5).
+  if (options.relocalise_delayed_depth) {
+    std::vector<double> times;
+    std::vector<Rigid3d> poses;
+    std::vector<size_t> slot_of;  // posed frame -> its place in times/poses
+    for (size_t i = 0; i < frames.size(); ++i) {
+      slot_of.push_back(times.size());
+      if (!frames[i].posed) continue;
+      times.push_back(frames[i].timestamp_s);
+      poses.push_back(frames[i].view.room_from_camera);
+    }
+    std::vector<std::pair<size_t, Rigid3d>> to_move;  // frame, colour_from_depth
+    for (size_t i = 0; i < frames.size(); ++i) {
+      const ScanFrame& f = frames[i];
+      if (!f.localized || f.depth_delay_s == 0) continue;
+      if (const std::optional<Rigid3d> m =
+              ColourFromDepthCamera(times, poses, slot_of[i], f.depth_delay_s))
+        to_move.emplace_back(i, *m);
+    }
+    if (!to_move.empty()) {
+      step("localising the body scan again with each frame's depth as of its colour instant", 0.56);
+      t0 = Clock::now();
+      CameraLocalizer again(plan.room_map, camera, localizer_options);
+      for (const auto& [i, colour_from_depth] : to_move) {
+        ScanFrame& f = frames[i];
+        RgbdFrame frame = scan.LoadFrame(f.index, camera);
+        CorrectDepthImage(camera, plan.room_map.depth_correction, &frame.depth);
+        frame.depth = DepthAtColourInstant(frame.depth, camera.depth_scale, camera.fx, camera.fy,
+                                           camera.cx, camera.cy, colour_from_depth);
+        frame.depth_delay_s = 0;
+        again.SuggestSearchStart(f.room_from_camera);
+        const LocalizationResult located = again.Localize(frame);
+        if (!located.ok) continue;  // the first pose kept
+        f.room_from_camera = located.room_from_camera;
+        f.pos_sigma_mm = located.position_sigma_mm;
+        f.rot_sigma_deg = located.rotation_sigma_deg;
+        ++result.frames_relocalised_with_moved_depth;
+      }
+      // The scan placed by them: the sticker-posed frames moved by the
+      // offset the new room poses give; the others take their new pose.
+      std::vector<Offset> offsets;
+      std::vector<double> offset_times;
+      const Eigen::Vector3d centre = StickerCentre(result.marker_map);
+      for (const ScanFrame& f : frames) {
+        if (!f.localized || !f.by_stickers) continue;
+        offsets.push_back(OffsetAt(f.room_from_camera * f.view.room_from_camera.Inverse(), centre));
+        offset_times.push_back(f.timestamp_s);
+      }
+      const std::optional<Rigid3d> delta = RobustMeanOffset(offsets, centre, 0.002, 1);
+      if (delta) SetRoomPlacement(MeanOffsetSigma(offsets, offset_times, 0.002), &result);
+      for (ScanFrame& f : frames) {
+        if (f.by_stickers) {
+          if (delta) f.view.room_from_camera = *delta * f.view.room_from_camera;
+        } else if (f.localized) {
+          f.view.room_from_camera = f.room_from_camera;
+        }
+      }
+      result.marker_map = BuildBodyMarkerMap(views_of(false), camera, map_options);
+      t_localize += SecondsSince(t0);
+    }
+  }
   result.times.localization_s = t_localize;
   result.times.marker_map_s = t_markers;
 

@@ -124,6 +124,16 @@ struct SessionStageOptions {
   /// corners in the scan's views (sticker_motion.h); where it cannot be
   /// told, or off, a sticker moves along its normal.
   bool sticker_motion_directions = true;
+  /// Depth of another instant than its colour (sensor/depth_timing.h): the
+  /// first localisation can only take the camera's motion over the delay
+  /// out of the room's depth (MarginaliseSharedMotion); once the frames are
+  /// posed, the room-localised ones are localised again with their depth as
+  /// of their colour instant, by the motion between the posed frames around
+  /// them (BuildSession, step 2b), and the scan is placed in the room by
+  /// those poses. Measured on six simulated cases with depth 6-12 ms early
+  /// or late: the model at scan time 0.66 -> 0.49 mm mean, 1.17 -> 0.68 mm
+  /// at most (benchmark/accuracy.md, session 45).
+  bool relocalise_delayed_depth = true;
   int poisson_depth = 8;
   /// Room landmarks the scan sees (room_map/scan_landmarks.h), stored with
   /// the body marker map for tracking: at most this many (they come first
@@ -181,6 +191,9 @@ struct SessionStageResult {
   /// Frames whose depth, of another instant than their colour, was moved to
   /// the colour instant (sensor/depth_timing.h: ColourFromDepthCamera).
   int frames_depth_moved_to_colour = 0;
+  /// Room-localised frames localised again with their depth as of their
+  /// colour instant (SessionStageOptions::relocalise_delayed_depth).
+  int frames_relocalised_with_moved_depth = 0;
   /// How the scan's camera response was found (estimated, or assumed).
   std::string camera_response;
   BodyMarkerMapResult marker_map;
