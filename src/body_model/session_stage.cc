@@ -140,6 +140,7 @@ std::string SessionStageResult::SurfaceMotionText() const {
 std::string SessionStageOptions::Check() const {
   if (case_dir.empty()) return "no case folder given";
   if (!(max_room_placement_sigma_mm > 0)) return "max_room_placement_sigma_mm must be positive";
+  if (!(relocalise_max_gap_s > 0)) return "relocalise_max_gap_s must be positive";
   if (!(min_still_surface_share > 0 && min_still_surface_share <= 1)) {
     return "min_still_surface_share must be in (0, 1]";
   }
@@ -576,8 +577,8 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     for (size_t i = 0; i < frames.size(); ++i) {
       const ScanFrame& f = frames[i];
       if (!f.localized || f.depth_delay_s == 0) continue;
-      if (const std::optional<Rigid3d> m =
-              ColourFromDepthCamera(times, poses, slot_of[i], f.depth_delay_s))
+      if (const std::optional<Rigid3d> m = ColourFromDepthCamera(
+              times, poses, slot_of[i], f.depth_delay_s, options.relocalise_max_gap_s))
         to_move.emplace_back(i, *m);
     }
     if (!to_move.empty()) {

@@ -101,7 +101,7 @@ cv::Mat DepthAtColourInstant(const cv::Mat& depth, double depth_scale, double fx
 
 std::optional<Rigid3d> ColourFromDepthCamera(const std::vector<double>& times_s,
                                              const std::vector<Rigid3d>& room_from_camera, size_t k,
-                                             double delay_s) {
+                                             double delay_s, double max_gap_s) {
   const size_t n = std::min(times_s.size(), room_from_camera.size());
   if (delay_s == 0 || k >= n || n < 2) return std::nullopt;
   // The pair around the depth instant: k and the next frame for a later
@@ -110,7 +110,7 @@ std::optional<Rigid3d> ColourFromDepthCamera(const std::vector<double>& times_s,
   if (a + 1 >= n) a = n - 2;
   const size_t b = a + 1;
   const double gap = times_s[b] - times_s[a];
-  if (!(gap > 0 && gap <= kMaxInterpolationGapS)) return std::nullopt;
+  if (!(gap > 0 && gap <= max_gap_s)) return std::nullopt;
   // Constant velocity: the motion a -> b scaled to the depth instant.
   const double f = (times_s[k] + delay_s - times_s[a]) / gap;
   const Rigid3d a_from_b = room_from_camera[a].Inverse() * room_from_camera[b];

@@ -92,12 +92,13 @@ DelayedDepthSigma DelayedDepthSigmaOf(double delay_s, const Rigid3d* step, doubl
 /// the camera at its colour instant), the camera at the depth instant
 /// interpolated at constant velocity between the two posed frames around it
 /// (`room_from_camera` at `times_s`, in time order; beyond the last or before
-/// the first, from the nearest two). nullopt without a neighbour within
-/// kMaxInterpolationGapS, or with no delay.
+/// the first, from the nearest two). nullopt when those two are more than
+/// `max_gap_s` apart, or with no delay.
 constexpr double kMaxInterpolationGapS = 0.5;
 std::optional<Rigid3d> ColourFromDepthCamera(const std::vector<double>& times_s,
                                              const std::vector<Rigid3d>& room_from_camera, size_t k,
-                                             double delay_s);
+                                             double delay_s,
+                                             double max_gap_s = kMaxInterpolationGapS);
 
 /// A recording whose frames are placed before its depth is used (the plan:
 /// from its markers and keypoints): a depth image (CV_16UC1, `depth_scale`
