@@ -130,16 +130,15 @@ struct SessionStageOptions {
   /// posed, the room-localised ones are localised again with their depth as
   /// of their colour instant, by the motion between the posed frames around
   /// them (BuildSession, step 2b), and the scan is placed in the room by
-  /// those poses. Measured on six simulated cases with depth 6-12 ms early
-  /// or late: the model at scan time 0.66 -> 0.49 mm mean, 1.17 -> 0.68 mm
-  /// at most (benchmark/accuracy.md, session 45). Only where the posed
+  /// those poses (benchmark/accuracy.md, session 45: six simulated cases
+  /// at 15 fps with depth 6-12 ms early or late). Only where the posed
   /// frames around the depth instant are at most `relocalise_max_gap_s`
-  /// apart: the localiser then trusts the moved depth as synced, and the
-  /// motion between frames farther apart is not known well enough (scans
-  /// of frames 0.13-0.23 s apart, posed every 0.26-0.46 s, came out worse
-  /// on the sweep's delayed random seeds; benchmark/accuracy.md, session 45).
+  /// apart (two frames at 15 fps): the second localisation trusts the
+  /// moved depth as synced, and a hand-held camera's motion over longer
+  /// gaps is not constant velocity (the sweep's sparse random scans, frames
+  /// 0.13-0.23 s apart, came out worse with the pass).
   bool relocalise_delayed_depth = true;
-  double relocalise_max_gap_s = 0.2;
+  double relocalise_max_gap_s = 0.15;
   int poisson_depth = 8;
   /// Room landmarks the scan sees (room_map/scan_landmarks.h), stored with
   /// the body marker map for tracking: at most this many (they come first
