@@ -477,7 +477,7 @@ TEST(SessionStage, RoomOffsetFromFramesRegisteredToTheSurface) {
 // trusts (relocalise_max_gap_s): left as read by default, and localised
 // again with the limit opened to 0.5 s.
 // Measured on six default-like cases with depth 6-12 ms early or late
-// (benchmark/accuracy.md, session 45): the model at scan time 0.66 -> 0.49
+// (benchmark/accuracy.md, session 45): the model at scan time 0.66 -> 0.51
 // mm mean, 1.17 -> 0.68 mm at most.
 TEST(SessionStage, DepthOfAnotherInstantIsLocalisedAgainAsOfItsColourInstant) {
   TempDir dir;
