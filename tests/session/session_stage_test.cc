@@ -473,7 +473,7 @@ TEST(SessionStage, RoomOffsetFromFramesRegisteredToTheSurface) {
 // the room-localised scan frames are localised again with their depth as
 // of their colour instant (SessionStageOptions::relocalise_delayed_depth),
 // and the scan is placed by those poses; a synced scan has nothing to move.
-// This small scan's frames are 0.4 s apart, beyond the motion the default
+// This small scan's frames are 0.5 s apart, beyond the motion the default
 // trusts (relocalise_max_gap_s): left as read by default, and localised
 // again with the limit opened to 0.5 s.
 // Measured on six default-like cases with depth 6-12 ms early or late
