@@ -412,6 +412,23 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     KeypointSet keypoints;                    ///< for the room landmarks the scan sees (step 7)
   };
   std::vector<ScanFrame> frames;
+  // The posed frames in scan order, their times and poses: the camera's path
+  // the motion over a depth delay is taken from (ColourFromDepthCamera).
+  struct PosedTrajectory {
+    std::vector<size_t> frames;
+    std::vector<double> times;
+    std::vector<Rigid3d> poses;
+  };
+  const auto posed_trajectory = [&frames] {
+    PosedTrajectory path;
+    for (size_t i = 0; i < frames.size(); ++i) {
+      if (!frames[i].posed) continue;
+      path.frames.push_back(i);
+      path.times.push_back(frames[i].timestamp_s);
+      path.poses.push_back(frames[i].view.room_from_camera);
+    }
+    return path;
+  };
   std::vector<BodyScanView> surface_views;  // the views the final sticker map is fitted to
   BodyMarkerMapResult surface_views_map;    // that map, in their frame
   std::vector<PointCloud>
@@ -564,22 +581,14 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   //     pose them consistently), and the room poses they give replace the
   //     first ones; the scan's placement from them (again in step 5).
   if (options.relocalise_delayed_depth) {
-    std::vector<double> times;
-    std::vector<Rigid3d> poses;
-    std::vector<size_t> slot_of;  // posed frame -> its place in times/poses
-    for (size_t i = 0; i < frames.size(); ++i) {
-      slot_of.push_back(times.size());
-      if (!frames[i].posed) continue;
-      times.push_back(frames[i].timestamp_s);
-      poses.push_back(frames[i].view.room_from_camera);
-    }
+    const PosedTrajectory path = posed_trajectory();
     std::vector<std::pair<size_t, Rigid3d>> to_move;  // frame, colour_from_depth
-    for (size_t i = 0; i < frames.size(); ++i) {
-      const ScanFrame& f = frames[i];
+    for (size_t k = 0; k < path.frames.size(); ++k) {
+      const ScanFrame& f = frames[path.frames[k]];
       if (!f.localized || f.depth_delay_s == 0) continue;
       if (const std::optional<Rigid3d> m = ColourFromDepthCamera(
-              times, poses, slot_of[i], f.depth_delay_s, options.relocalise_max_gap_s))
-        to_move.emplace_back(i, *m);
+              path.times, path.poses, k, f.depth_delay_s, options.relocalise_max_gap_s))
+        to_move.emplace_back(path.frames[k], *m);
     }
     if (!to_move.empty()) {
       step("localising the body scan again with each frame's depth as of its colour instant", 0.56);
@@ -635,20 +644,12 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     // between the posed frames around its depth instant. Without it the
     // scan's fast turn put the model 0.5 deg off at scan time (simulated
     // xtion seed 41, depth 10 ms late).
-    std::vector<size_t> posed;
-    std::vector<double> times;
-    std::vector<Rigid3d> poses;
-    for (size_t i = 0; i < frames.size(); ++i) {
-      if (!frames[i].posed) continue;
-      posed.push_back(i);
-      times.push_back(frames[i].timestamp_s);
-      poses.push_back(frames[i].view.room_from_camera);
-    }
-    for (size_t k = 0; k < posed.size(); ++k) {
-      ScanFrame& f = frames[posed[k]];
+    const PosedTrajectory path = posed_trajectory();
+    for (size_t k = 0; k < path.frames.size(); ++k) {
+      ScanFrame& f = frames[path.frames[k]];
       if (f.depth_delay_s == 0 || (!f.cloud && !f.sticker_cloud)) continue;
       const std::optional<Rigid3d> colour_from_depth =
-          ColourFromDepthCamera(times, poses, k, f.depth_delay_s);
+          ColourFromDepthCamera(path.times, path.poses, k, f.depth_delay_s);
       if (!colour_from_depth) continue;
       if (f.cloud) f.cloud->Transform(*colour_from_depth);
       if (f.sticker_cloud) f.sticker_cloud->Transform(*colour_from_depth);

@@ -63,12 +63,12 @@ Sequence Sequence::OpenImpl(const std::filesystem::path& folder, bool every_colo
 }
 
 namespace {
-// The depth image of a frame, or empty with the reason.
 // A colour image depth.txt pairs with no depth image.
 std::string NoDepthListed() {
   return "no depth image within " + StringPrintf("%.3f", kFrameAssociationS) + " s in depth.txt";
 }
 
+// The depth image of a frame, or empty with the reason.
 cv::Mat ReadDepth(const std::filesystem::path& depth_file, const CameraIntrinsics& intrinsics, std::string* problem) {
   if (!std::filesystem::exists(depth_file)) {
     *problem = depth_file.string() + ": missing depth image";
