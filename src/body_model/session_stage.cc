@@ -437,6 +437,9 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
   cv::Mat gray;
   std::map<int, int> unmapped_reads;  // room marker id -> frames that read it, not in the map
   double t_localize = 0, t_markers = 0, t_recon = 0, t_landmarks = 0;
+  // The depth camera's systematic error measured in the room (the same
+  // camera), removed before the depth is used.
+  const DepthCorrector depth_corrector(camera, plan.room_map.depth_correction);
   for (size_t i = 0; i < scan.size(); ++i) {
     const bool for_markers = i % marker_step == 0;
     const bool for_recon = i % recon_step == 0;
@@ -445,9 +448,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
     if (i % 20 == 0) step(StringPrintf("body scan frame %zu of %zu", i + 1, scan.size()), 0.05 + 0.5 * i / scan.size());
     auto t0 = Clock::now();
     RgbdFrame frame = scan.LoadFrame(i, camera);
-    // The depth camera's systematic error measured in the room (the same
-    // camera), removed before the depth is used.
-    if (!frame.depth.empty()) CorrectDepthImage(camera, plan.room_map.depth_correction, &frame.depth);
+    if (!frame.depth.empty()) depth_corrector.Apply(&frame.depth);
     const LocalizationResult located = localizer.Localize(frame);
     t_localize += SecondsSince(t0);
     ScanFrame f;
@@ -597,7 +598,7 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       for (const auto& [i, colour_from_depth] : to_move) {
         ScanFrame& f = frames[i];
         RgbdFrame frame = scan.LoadFrame(f.index, camera);
-        CorrectDepthImage(camera, plan.room_map.depth_correction, &frame.depth);
+        depth_corrector.Apply(&frame.depth);
         frame.depth = DepthAtColourInstant(frame.depth, camera.depth_scale, camera.fx, camera.fy,
                                            camera.cx, camera.cy, colour_from_depth);
         frame.depth_delay_s = 0;

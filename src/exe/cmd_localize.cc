@@ -104,9 +104,10 @@ int RunLocalizeCommand(const std::vector<std::string>& argv) {
          "matching_ms,pnp_ms,refinement_ms,total_ms,why_lost\n";
   int tracked = 0, relocalized = 0, lost = 0;
   double total_ms = 0;
+  const DepthCorrector depth_corrector(config.camera, localizer.map().depth_correction);
   for (size_t i = 0; i < sequence.size(); ++i) {
     RgbdFrame frame = sequence.LoadFrame(i, config.camera);
-    if (!frame.depth.empty()) CorrectDepthImage(config.camera, localizer.map().depth_correction, &frame.depth);
+    if (!frame.depth.empty()) depth_corrector.Apply(&frame.depth);
     const LocalizationResult r = localizer.Localize(frame);
     if (r.ok) poses.push_back({frame.timestamp_s, r.room_from_camera});
     tracked += r.status == LocalizationStatus::kTracked;

@@ -345,7 +345,7 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   tracker_options.body.sticker_motion_direction = inputs.sticker_motion_direction;
   tracker_options.body.moving_surface_patches = inputs.moving_surface_patches;
   if (inputs.surface_patch_m > 0) tracker_options.body.moving_surface_patch_m = inputs.surface_patch_m;
-  const DepthCorrection depth_correction = inputs.room_map.depth_correction;
+  const DepthCorrector depth_corrector(config.camera, inputs.room_map.depth_correction);
   Tracker tracker(inputs.room_map, inputs.model, inputs.model_from_marker, inputs.room_from_model_target, camera,
                   tracker_options, inputs.room_from_model_at_scan);
   // Before the first frame arrives (a live source starts in FrameFeed): the
@@ -391,7 +391,11 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
     // the correction is the latency.
     const Clock::time_point arrival = frame.arrival == Clock::time_point{} ? Clock::now() : frame.arrival;
     if (readable) {
-      if (!frame.depth.empty()) CorrectDepthImage(config.camera, depth_correction, &frame.depth);
+      // Depth of another type or size is the tracker's to refuse, with the reason.
+      if (!frame.depth.empty() && frame.depth.type() == CV_16UC1 &&
+          frame.depth.cols == camera.width && frame.depth.rows == camera.height) {
+        depth_corrector.Apply(&frame.depth);
+      }
       depth_ms = MsSince(arrival);
       tracked = tracker.Process(frame);
       tracked.timings.total_ms = MsSince(arrival);

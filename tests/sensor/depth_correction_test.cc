@@ -7,6 +7,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
 
 #include "sensor/depth_correction.h"
 
@@ -214,6 +215,45 @@ TEST(DepthCorrection, AQuietSensorsFarFloorClutterDoesNotBendTheField) {
     EXPECT_LT(top, 0.5) << "seed " << seed;
     EXPECT_LT(all, 0.4) << "seed " << seed;
   }
+}
+
+// The corrector of a stream gives CorrectDepthImage's values to the bit
+// (zeros stay zeros, readings of every range), and corrects an image of
+// another size as CorrectDepthImage does.
+TEST(DepthCorrection, TheStreamsCorrectorGivesTheOneImageValues) {
+  const CameraIntrinsics k = Xtion();
+  DepthCorrection c;
+  c.scale = 0.003;
+  c.nx = 9;
+  c.ny = 7;
+  c.x0 = -0.65;
+  c.x1 = 0.65;
+  c.y0 = -0.5;
+  c.y1 = 0.5;
+  for (int i = 0; i < c.nx * c.ny; ++i) c.grid.push_back(0.004 * std::sin(0.7 * i));
+  c.grid[5] = 0;  // a node without error
+  const DepthCorrector corrector(k, c);
+  ASSERT_FALSE(corrector.IsIdentity());
+  std::mt19937 rng(3);
+  std::uniform_int_distribution<int> raw(0, 65535);
+  for (const cv::Size size : {cv::Size(k.width, k.height), cv::Size(320, 240)}) {
+    cv::Mat depth(size, CV_16UC1);
+    for (int v = 0; v < depth.rows; ++v) {
+      for (int u = 0; u < depth.cols; ++u)
+        depth.at<uint16_t>(v, u) = static_cast<uint16_t>(u % 7 == 0 ? 0 : raw(rng));
+    }
+    cv::Mat expected = depth.clone(), got = depth.clone();
+    CorrectDepthImage(k, c, &expected);
+    corrector.Apply(&got);
+    EXPECT_EQ(cv::countNonZero(expected != got), 0) << size;
+    EXPECT_GT(cv::countNonZero(expected != depth), depth.total() / 2)
+        << "the correction moved the readings";
+    EXPECT_EQ(cv::countNonZero(got == 0), cv::countNonZero(depth == 0));
+  }
+  // No correction: the image as it was.
+  cv::Mat depth(k.height, k.width, CV_16UC1, cv::Scalar(1234));
+  DepthCorrector(k, DepthCorrection()).Apply(&depth);
+  EXPECT_EQ(cv::countNonZero(depth != 1234), 0);
 }
 
 }  // namespace

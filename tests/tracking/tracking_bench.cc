@@ -124,7 +124,7 @@ void Track(benchmark::State& state, const BenchData& data, bool parallel) {
   }
   TrackerOptions options = data.options;
   options.parallel = parallel;
-  const DepthCorrection& depth_correction = data.inputs.room_map.depth_correction;
+  const DepthCorrector depth_corrector(data.config.camera, data.inputs.room_map.depth_correction);
   std::unique_ptr<Tracker> tracker;
   double camera_ms = 0, body_ms = 0, body_detection_ms = 0, body_pose_ms = 0, combine_ms = 0, depth_ms = 0;
   std::vector<double> totals, tracked_totals;
@@ -149,7 +149,7 @@ void Track(benchmark::State& state, const BenchData& data, bool parallel) {
     RgbdFrame frame = data.frames[i];  // shallow: the colour image is only read
     if (!frame.depth.empty()) frame.depth = data.frames[i].depth.clone();
     const auto arrival = Clock::now();
-    if (!frame.depth.empty()) CorrectDepthImage(data.config.camera, depth_correction, &frame.depth);
+    if (!frame.depth.empty()) depth_corrector.Apply(&frame.depth);
     const double frame_depth_ms = MsSince(arrival);
     const TrackedFrame result = tracker->Process(frame);
     const double total_ms = MsSince(arrival);
