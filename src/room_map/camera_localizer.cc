@@ -1196,23 +1196,38 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     }
   }
   if (!ok) {
-    // Relocalise: the whole image for markers, the whole map for keypoints.
-    if (options_.use_markers && !full_detection_done) {
+    // Relocalise: the keypoints searched widely around where the camera is
+    // about to be or last was, then the whole image for markers (and those
+    // searches again if it found more), then the whole map for keypoints.
+    auto wide_searches = [&] {
+      if (options_.use_keypoints && search_start) {
+        refined = m.Track(*search_start, options_.wide_search_radius_px, std::nullopt,
+                          &tm.matching_ms, &tm.refinement_ms, &mark);
+        ok = m.Accept(refined, false, &out);
+        if (ok) out.status = LocalizationStatus::kRelocalized;
+      }
+      if (!ok && options_.use_keypoints && m.have_last &&
+          m.frames_lost <= options_.recent_pose_max_frames) {
+        refined = m.Track(m.last_camera_from_room, options_.wide_search_radius_px, std::nullopt,
+                          &tm.matching_ms, &tm.refinement_ms, &mark);
+        ok = m.Accept(refined, false, &out);
+        if (ok) out.status = LocalizationStatus::kRelocalized;
+      }
+    };
+    // The markers the windows found take part; the whole image is searched
+    // only when these fail. Measured on random-conditions sequences, where
+    // most frames the prediction did not place were placed by the wide
+    // search after a whole-image search of 15-45 ms: frames searched whole
+    // and then placed 16 -> 6, 14 -> 3 and 40 -> 8 on three of them, the
+    // localiser's CPU time a frame 23.4 -> 19.8, 18.5 -> 17.7, 14.1 -> 11.4
+    // ms; MTE the same to within 0.03 mm on 20 sequences.
+    const size_t markers_before = m.markers.size();
+    wide_searches();
+    if (!ok && options_.use_markers && !full_detection_done) {
       m.DetectFull();
       m.SampleMarkerDepths();
       Lap(&mark, &tm.detection_ms);
-    }
-    if (options_.use_keypoints && search_start) {
-      refined = m.Track(*search_start, options_.wide_search_radius_px, std::nullopt, &tm.matching_ms,
-                        &tm.refinement_ms, &mark);
-      ok = m.Accept(refined, false, &out);
-      if (ok) out.status = LocalizationStatus::kRelocalized;
-    }
-    if (!ok && options_.use_keypoints && m.have_last && m.frames_lost <= options_.recent_pose_max_frames) {
-      refined = m.Track(m.last_camera_from_room, options_.wide_search_radius_px, std::nullopt, &tm.matching_ms,
-                        &tm.refinement_ms, &mark);
-      ok = m.Accept(refined, false, &out);
-      if (ok) out.status = LocalizationStatus::kRelocalized;
+      if (m.markers.size() > markers_before) wide_searches();
     }
     const std::optional<Rigid3d> hypothesis =
         ok ? std::nullopt : m.Relocalise(frame, &tm.pnp_ms, &tm.matching_ms, &mark);
