@@ -234,6 +234,8 @@ class Tracker {
   std::optional<Rigid3d> last_room_from_camera_, last_room_from_model_, expected_room_from_model_;
   PoseFilter filter_;
   double last_camera_t_ = -1, last_model_t_ = -1;
+  // Whether the last frame processed placed its camera in the room.
+  bool camera_placed_last_frame_ = false;
   // The patient's room pose in the last frame whose camera and patient were
   // both found (whether or not the frame was reported), and when.
   std::optional<Rigid3d> last_seen_room_from_model_;
