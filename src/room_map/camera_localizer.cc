@@ -1220,7 +1220,7 @@ LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
     // search after a whole-image search of 15-45 ms: frames searched whole
     // and then placed 16 -> 6, 14 -> 3 and 40 -> 8 on three of them, the
     // localiser's CPU time a frame 23.4 -> 19.8, 18.5 -> 17.7, 14.1 -> 11.4
-    // ms; MTE the same to within 0.03 mm on 20 sequences.
+    // ms; MTE the same to within 0.03 mm on 23 sequences.
     const size_t markers_before = m.markers.size();
     wide_searches();
     if (!ok && options_.use_markers && !full_detection_done) {

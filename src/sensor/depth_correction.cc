@@ -48,7 +48,10 @@ bool DepthCorrection::IsIdentity() const {
 }
 
 double DepthCorrection::TrueDepth(double z, double x, double y) const {
-  const double f = Field(x, y);
+  return TrueDepthWithField(z, Field(x, y));
+}
+
+double DepthCorrection::TrueDepthWithField(double z, double f) const {
   // z = t (1 + scale) + t^2 f: the root near z.
   const double b = 1 + scale;
   if (std::abs(f) < 1e-12) return z / b;
@@ -362,6 +365,7 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
                                    out.cross_validated_gain);
   return out;
 }
+
 void CorrectDepthImage(const CameraIntrinsics& intrinsics, const DepthCorrection& correction,
                        cv::Mat* depth) {
   ARPOS_CHECK(depth != nullptr && depth->type() == CV_16UC1, "CorrectDepthImage needs a CV_16UC1 image");
@@ -387,17 +391,16 @@ DepthCorrector::DepthCorrector(const CameraIntrinsics& intrinsics,
       height_(intrinsics.height),
       to_m_(1.0 / intrinsics.depth_scale),
       depth_scale_(intrinsics.depth_scale),
-      b_(1 + correction.scale),
       identity_(correction.IsIdentity()) {
   ARPOS_CHECK(width_ > 0 && height_ > 0 && intrinsics.depth_scale > 0,
               "DepthCorrector needs intrinsics with a size and a depth scale");
   if (identity_) return;
-  four_field_.resize(static_cast<size_t>(width_) * height_);
+  field_.resize(static_cast<size_t>(width_) * height_);
   for (int v = 0; v < height_; ++v) {
     const double y = (v - intrinsics.cy) / intrinsics.fy;
     for (int u = 0; u < width_; ++u) {
       const double x = (u - intrinsics.cx) / intrinsics.fx;
-      four_field_[static_cast<size_t>(v) * width_ + u] = 4 * correction.Field(x, y);
+      field_[static_cast<size_t>(v) * width_ + u] = correction.Field(x, y);
     }
   }
 }
@@ -410,22 +413,13 @@ void DepthCorrector::Apply(cv::Mat* depth) const {
     CorrectDepthImage(intrinsics_, correction_, depth);  // not this camera's size: as one image
     return;
   }
-  // DepthCorrection::TrueDepth's arithmetic, term for term (4 * f * z is
-  // (4 f) z), so the values are CorrectDepthImage's to the bit.
   cv::parallel_for_(cv::Range(0, height_), [&](const cv::Range& rows) {
     for (int v = rows.start; v < rows.end; ++v) {
       uint16_t* row = depth->ptr<uint16_t>(v);
-      const double* four_f = four_field_.data() + static_cast<size_t>(v) * width_;
+      const double* field = field_.data() + static_cast<size_t>(v) * width_;
       for (int u = 0; u < width_; ++u) {
         if (row[u] == 0) continue;
-        const double z = row[u] * to_m_;
-        double t;
-        if (std::abs(four_f[u] / 4) < 1e-12) {
-          t = z / b_;
-        } else {
-          const double disc = b_ * b_ + four_f[u] * z;
-          t = disc < 0 ? z / b_ : 2 * z / (b_ + std::sqrt(disc));
-        }
+        const double t = correction_.TrueDepthWithField(row[u] * to_m_, field[u]);
         row[u] = static_cast<uint16_t>(std::clamp(std::lround(t * depth_scale_), 1L, 65535L));
       }
     }

@@ -44,6 +44,8 @@ struct DepthCorrection {
   bool IsIdentity() const;
   /// The true depth for a measured one at normalised coordinates (x, y).
   double TrueDepth(double z_measured_m, double x, double y) const;
+  /// The same, with the field at that pixel already evaluated (Field(x, y)).
+  double TrueDepthWithField(double z_measured_m, double field) const;
   /// Measured depth error at z_true = 1 m in the image centre and its
   /// largest magnitude over the image corners (mm), for people.
   double ErrorAt1mCentreMm() const;
@@ -129,9 +131,9 @@ class DepthCorrector {
   CameraIntrinsics intrinsics_;
   DepthCorrection correction_;
   int width_ = 0, height_ = 0;
-  double to_m_ = 0, depth_scale_ = 0, b_ = 1;
+  double to_m_ = 0, depth_scale_ = 0;
   bool identity_ = true;
-  std::vector<double> four_field_;  ///< 4 * field at each pixel, row-major
+  std::vector<double> field_;  ///< DepthCorrection::Field at each pixel, row-major
 };
 
 }  // namespace arpos
