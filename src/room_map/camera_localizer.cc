@@ -549,10 +549,8 @@ struct CameraLocalizer::Impl {
         [&](const cv::Range& range) {
           for (int i = range.start; i < range.end; ++i) {
             const std::uint8_t* d = keypoints.descriptors.ptr<std::uint8_t>(i);
-            NearestTwo nearest;
-            for (int l = first; l < n_landmarks; ++l) {
-              nearest.Offer(l, HammingDistance32(d, map.landmark_descriptors.ptr<std::uint8_t>(l)));
-            }
+            const NearestTwo nearest =
+                NearestTwoOfRows(d, map.landmark_descriptors, first, n_landmarks);
             if (nearest.best < 0 || nearest.d1 > options.relocalisation_max_hamming ||
                 nearest.d1 > options.relocalisation_ratio * nearest.d2) {
               continue;

@@ -6,6 +6,11 @@
 
 #include <opencv2/imgproc.hpp>
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define ARPOS_HAVE_AVX2_PATH 1
+#endif
+
 #include "util/check.h"
 
 namespace arpos {
@@ -262,6 +267,70 @@ void KeypointExtractor::ReadDepth(const cv::Mat& depth, double depth_scale,
     set->depth_m[i] = SmoothDepthAt(depth, cvRound(set->keypoints[i].pt.x),
                                     cvRound(set->keypoints[i].pt.y), depth_scale, options_);
   }
+}
+
+NearestTwo NearestTwoOfRowsPortable(const std::uint8_t* query, const cv::Mat& descriptors,
+                                    int first, int last) {
+  first = std::max(first, 0);
+  last = std::min(last, descriptors.rows);
+  NearestTwo nearest;
+  for (int l = first; l < last; ++l) {
+    nearest.Offer(l, HammingDistance32(query, descriptors.ptr<std::uint8_t>(l)));
+  }
+  return nearest;
+}
+
+namespace {
+
+#if defined(ARPOS_HAVE_AVX2_PATH)
+// A descriptor in one 256-bit register: the XOR's bits counted per nibble by
+// table lookup (PSHUFB), summed by PSADBW.
+__attribute__((target("avx2"))) NearestTwo NearestTwoOfRowsAvx2(const std::uint8_t* query,
+                                                                const cv::Mat& descriptors,
+                                                                int first, int last) {
+  const __m256i table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
+                                         1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+  const __m256i nibble = _mm256_set1_epi8(0x0f);
+  const __m256i q = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(query));
+  NearestTwo nearest;
+  for (int l = first; l < last; ++l) {
+    const __m256i x = _mm256_xor_si256(
+        q, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(descriptors.ptr<std::uint8_t>(l))));
+    const __m256i bits = _mm256_add_epi8(
+        _mm256_shuffle_epi8(table, _mm256_and_si256(x, nibble)),
+        _mm256_shuffle_epi8(table, _mm256_and_si256(_mm256_srli_epi16(x, 4), nibble)));
+    const __m256i sums = _mm256_sad_epu8(bits, _mm256_setzero_si256());
+    const __m128i half =
+        _mm_add_epi64(_mm256_castsi256_si128(sums), _mm256_extracti128_si256(sums, 1));
+    nearest.Offer(l, _mm_cvtsi128_si32(half) + _mm_cvtsi128_si32(_mm_srli_si128(half, 8)));
+  }
+  return nearest;
+}
+#endif
+
+}  // namespace
+
+bool NearestTwoOfRowsUsesAvx2() {
+#if defined(ARPOS_HAVE_AVX2_PATH)
+  static const bool avx2 = __builtin_cpu_supports("avx2");
+  return avx2;
+#else
+  return false;
+#endif
+}
+
+NearestTwo NearestTwoOfRows(const std::uint8_t* query, const cv::Mat& descriptors, int first,
+                            int last) {
+  ARPOS_CHECK(descriptors.type() == CV_8UC1 && descriptors.cols == 32,
+              "NearestTwoOfRows needs 32-byte descriptors (CV_8U), got type "
+                  << descriptors.type() << " with " << descriptors.cols << " columns");
+  first = std::max(first, 0);
+  last = std::min(last, descriptors.rows);
+#if defined(ARPOS_HAVE_AVX2_PATH)
+  static const bool avx2 = NearestTwoOfRowsUsesAvx2();
+  if (avx2) return NearestTwoOfRowsAvx2(query, descriptors, first, last);
+#endif
+  return NearestTwoOfRowsPortable(query, descriptors, first, last);
 }
 
 }  // namespace arpos

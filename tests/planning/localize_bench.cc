@@ -15,6 +15,7 @@
 // Counters (per frame, milliseconds of thread CPU time as the localiser
 // measures them): detection, keypoints, matching, pnp, refinement, total;
 // `localised` is the share of frames with a pose; `fps_cpu` = 1000 / total.
+// BM_NearestTwoOfRows: the brute-force descriptor search alone, no case.
 #include <cstdlib>
 #include <map>
 #include <memory>
@@ -24,6 +25,7 @@
 
 #include "planning/planning_test_util.h"
 #include "room_map/camera_localizer.h"
+#include "room_map/keypoints.h"
 #include "room_map/plan_stage.h"
 #include "sensor/sequence.h"
 
@@ -112,6 +114,29 @@ void BM_TrackMarkersOnly_640x480(benchmark::State& s) { Localize(s, "xtion", fal
 void BM_TrackMarkersOnly_1280x720(benchmark::State& s) { Localize(s, "l515", false, false); }
 void BM_Relocalize_640x480(benchmark::State& s) { Localize(s, "xtion", true, true); }
 void BM_Relocalize_1280x720(benchmark::State& s) { Localize(s, "l515", true, true); }
+
+// Brute-force matching as relocalisation does it (MatchGlobally): 1000
+// keypoints against 4000 map landmarks, random ORB-sized descriptors;
+// Arg 0 the SSE2 reference, 1 what NearestTwoOfRows runs on this processor
+// (label: avx2 or sse2). ms per 1000 x 4000.
+void BM_NearestTwoOfRows(benchmark::State& state) {
+  cv::Mat queries(1000, 32, CV_8U), rows(4000, 32, CV_8U);
+  cv::randu(queries, 0, 256);
+  cv::randu(rows, 0, 256);
+  const bool dispatched = state.range(0) == 1;
+  long checksum = 0;
+  for (auto _ : state) {
+    for (int i = 0; i < queries.rows; ++i) {
+      const NearestTwo n =
+          dispatched ? NearestTwoOfRows(queries.ptr<std::uint8_t>(i), rows, 0, rows.rows)
+                     : NearestTwoOfRowsPortable(queries.ptr<std::uint8_t>(i), rows, 0, rows.rows);
+      checksum += n.best + n.d1 + n.d2;
+    }
+  }
+  benchmark::DoNotOptimize(checksum);
+  state.SetLabel(dispatched ? (NearestTwoOfRowsUsesAvx2() ? "avx2" : "sse2") : "sse2 reference");
+}
+BENCHMARK(BM_NearestTwoOfRows)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 BENCHMARK(BM_Track_640x480)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_Track_1280x720)->Unit(benchmark::kMillisecond)->MinTime(2.0);

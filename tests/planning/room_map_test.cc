@@ -1,6 +1,7 @@
 // Room map building on a small simulated case (tests/planning/planning_test_util.h).
 #include <bitset>
 #include <fstream>
+#include <iostream>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -47,6 +48,53 @@ TEST(Keypoints, HammingDistanceCountsEveryDifferingBit) {
     }
     ASSERT_EQ(HammingDistance32(a, b), reference(a, b)) << "trial " << trial;
   }
+}
+
+TEST(Keypoints, TheNearestTwoRowsAreTheSameWithAndWithoutAvx2) {
+  // Random descriptors with planted near neighbours (exact copies, one or a
+  // few bits off, all bits off) and ties, in a view of a larger matrix (rows
+  // not contiguous with the query's); every range, including empty ones.
+  std::mt19937 random(11);
+  cv::Mat big(700, 40, CV_8U);
+  cv::randu(big, 0, 256);
+  cv::Mat rows = big(cv::Rect(4, 0, 32, 700));
+  std::uint8_t query[32];
+  for (int trial = 0; trial < 200; ++trial) {
+    for (auto& q : query) q = static_cast<std::uint8_t>(random());
+    const int plant = static_cast<int>(random() % 700);
+    std::copy(query, query + 32, rows.ptr<std::uint8_t>(plant));
+    if (trial % 2 == 0) rows.ptr<std::uint8_t>(plant)[random() % 32] ^= 1;
+    if (trial % 3 == 0) {  // a tie with the planted row, later in the matrix
+      const int twin = std::min(699, plant + 1 + static_cast<int>(random() % 50));
+      std::copy(rows.ptr<std::uint8_t>(plant), rows.ptr<std::uint8_t>(plant) + 32,
+                rows.ptr<std::uint8_t>(twin));
+    }
+    if (trial % 5 == 0) {
+      for (int i = 0; i < 32; ++i)
+        rows.ptr<std::uint8_t>(plant)[i] = static_cast<std::uint8_t>(~query[i]);
+    }
+    const int first = trial % 4 == 0 ? 0 : static_cast<int>(random() % 700);
+    const int last = trial % 7 == 0 ? first : first + static_cast<int>(random() % (701 - first));
+    const NearestTwo fast = NearestTwoOfRows(query, rows, first, last);
+    const NearestTwo reference = NearestTwoOfRowsPortable(query, rows, first, last);
+    ASSERT_EQ(fast.best, reference.best) << "trial " << trial;
+    ASSERT_EQ(fast.d1, reference.d1) << "trial " << trial;
+    ASSERT_EQ(fast.d2, reference.d2) << "trial " << trial;
+    if (last > first) {
+      NearestTwo offered;
+      for (int l = first; l < last; ++l)
+        offered.Offer(l, HammingDistance32(query, rows.ptr<std::uint8_t>(l)));
+      ASSERT_EQ(fast.best, offered.best);
+      ASSERT_EQ(fast.d2, offered.d2);
+    } else {
+      ASSERT_EQ(fast.best, -1);
+    }
+  }
+  // Beyond the matrix: clamped, not read.
+  EXPECT_EQ(NearestTwoOfRows(query, rows, -5, 10000).best,
+            NearestTwoOfRowsPortable(query, rows, 0, 700).best);
+  std::cout << "NearestTwoOfRows uses AVX2 here: " << (NearestTwoOfRowsUsesAvx2() ? "yes" : "no")
+            << "\n";
 }
 
 TEST(Keypoints, NearestTwoKeepsTheSmallestTwoDistancesWhateverTheOrder) {
