@@ -321,11 +321,12 @@ bool NearestTwoOfRowsUsesAvx2() {
 
 NearestTwo NearestTwoOfRows(const std::uint8_t* query, const cv::Mat& descriptors, int first,
                             int last) {
+  first = std::max(first, 0);
+  last = std::min(last, descriptors.rows);
+  if (first >= last) return NearestTwo();  // nothing to read (an empty map)
   ARPOS_CHECK(descriptors.type() == CV_8UC1 && descriptors.cols == 32,
               "NearestTwoOfRows needs 32-byte descriptors (CV_8U), got type "
                   << descriptors.type() << " with " << descriptors.cols << " columns");
-  first = std::max(first, 0);
-  last = std::min(last, descriptors.rows);
 #if defined(ARPOS_HAVE_AVX2_PATH)
   static const bool avx2 = NearestTwoOfRowsUsesAvx2();
   if (avx2) return NearestTwoOfRowsAvx2(query, descriptors, first, last);
