@@ -479,18 +479,8 @@ std::optional<RoomMapRecord> SqliteDatabase::GetRoomMap(RoomMapId id) {
           s->ColumnBlob(6), Context("room_maps.landmarks_in_room", "room map", id.value()));
     }
     if (!s->ColumnIsNull(7)) {
-      const std::string what = Context("room_maps.landmark_descriptors", "room map", id.value());
-      room_map.landmark_descriptors = DecodeByteMatrix(s->ColumnBlob(7), what);
-      // Localisation reads 32 bytes a row (ORB), one row a landmark.
-      if (room_map.landmark_descriptors.rows() > 0 &&
-          (room_map.landmark_descriptors.cols() != 32 ||
-           room_map.landmark_descriptors.rows() !=
-               static_cast<Eigen::Index>(room_map.landmarks_in_room.points.size()))) {
-        throw CorruptBlobError(
-            what + ": " + std::to_string(room_map.landmarks_in_room.points.size()) +
-            " landmarks but " + std::to_string(room_map.landmark_descriptors.rows()) + " x " +
-            std::to_string(room_map.landmark_descriptors.cols()) + " descriptors");
-      }
+      room_map.landmark_descriptors = DecodeByteMatrix(
+          s->ColumnBlob(7), Context("room_maps.landmark_descriptors", "room map", id.value()));
     }
     room_map.created_unix_ms = s->ColumnInt64(8);
     if (!s->ColumnIsNull(9)) room_map.camera_response = s->ColumnText(9);

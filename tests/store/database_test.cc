@@ -5,7 +5,6 @@
 #include <sqlite3.h>
 
 #include <chrono>
-#include <cstdio>
 #include <fstream>
 #include <set>
 
@@ -722,27 +721,6 @@ TEST(SqliteDatabase, CorruptBlobsInTheFileAreReportedWithTheRow) {
   // Blob and row disagree about the number of points.
   ASSERT_EQ(RawExec(*db, "UPDATE reconstructions SET num_points = num_points + 1"), SQLITE_OK);
   EXPECT_THROW(db->GetReconstruction(s.reconstruction.id), CorruptBlobError);
-  // Landmark descriptors localisation cannot read: rows of another width
-  // than ORB's 32 bytes, or another count than the map's landmarks.
-  ASSERT_TRUE(db->GetRoomMap(s.room_map.id).has_value());
-  for (const auto& [rows, cols] : {std::pair<int, int>{25, 16}, std::pair<int, int>{24, 32}}) {
-    std::string hex;
-    for (const std::uint8_t b : EncodeByteMatrix(ByteMatrix::Constant(rows, cols, 7))) {
-      char digits[3];
-      std::snprintf(digits, sizeof digits, "%02X", b);
-      hex += digits;
-    }
-    ASSERT_EQ(RawExec(*db, "UPDATE room_maps SET landmark_descriptors = x'" + hex + "'"),
-              SQLITE_OK);
-    try {
-      db->GetRoomMap(s.room_map.id);
-      ADD_FAILURE() << "no throw for " << rows << " x " << cols;
-    } catch (const CorruptBlobError& e) {
-      EXPECT_NE(std::string(e.what()).find("room_maps.landmark_descriptors of room map"),
-                std::string::npos)
-          << e.what();
-    }
-  }
 }
 
 TEST(SqliteDatabase, InfoAndDescriptionCountEveryTable) {

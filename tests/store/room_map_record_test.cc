@@ -154,6 +154,24 @@ TEST_F(RoomMapRecordTest, MalformedStoredTextIsAnInputErrorNamingTheMap) {
   }
 }
 
+// Localisation reads each landmark's descriptor as 32 bytes: a stored map
+// whose descriptor rows are of another width is an input error naming the
+// map, before any search reads them.
+TEST_F(RoomMapRecordTest, StoredDescriptorsOfAnotherWidthAreAnInputErrorNamingTheMap) {
+  RoomMapRecord record = ToRecord(SomeMap(), plan());
+  record.landmark_descriptors = ByteMatrix::Constant(3, 16, 7);
+  record.id = db_->AddRoomMap(record);
+  try {
+    FromRecord(*db_->GetRoomMap(record.id));
+    FAIL() << "expected an InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("room map " + std::to_string(record.id.value()) +
+                                         ": 3 landmarks but a 3 x 16 descriptor matrix"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // The room's surface (schema 10) round-trips with its voxel size; a map
 // without one reads back empty; a stored surface with a bad normal is an
 // input error naming the map.
