@@ -328,8 +328,7 @@ NearestTwo NearestTwoOfRows(const std::uint8_t* query, const cv::Mat& descriptor
               "NearestTwoOfRows needs 32-byte descriptors (CV_8U), got type "
                   << descriptors.type() << " with " << descriptors.cols << " columns");
 #if defined(ARPOS_HAVE_AVX2_PATH)
-  static const bool avx2 = NearestTwoOfRowsUsesAvx2();
-  if (avx2) return NearestTwoOfRowsAvx2(query, descriptors, first, last);
+  if (NearestTwoOfRowsUsesAvx2()) return NearestTwoOfRowsAvx2(query, descriptors, first, last);
 #endif
   return NearestTwoOfRowsPortable(query, descriptors, first, last);
 }

@@ -80,6 +80,19 @@ class RoomMapRecordTest : public ::testing::Test {
     store_ = test::WriteFullStore(*db_, 21);
   }
   PlanId plan() const { return store_.plan.id; }
+  // Stores `record` and expects reading it back to be an InputError saying
+  // "room map N" followed by `what`.
+  void ExpectReadRefused(RoomMapRecord record, const std::string& what) {
+    record.id = db_->AddRoomMap(record);
+    try {
+      FromRecord(*db_->GetRoomMap(record.id));
+      FAIL() << "expected an InputError";
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("room map " + std::to_string(record.id.value()) + what),
+                std::string::npos)
+          << e.what();
+    }
+  }
   std::unique_ptr<SqliteDatabase> db_;
   test::FullStore store_;
 };
@@ -132,26 +145,10 @@ TEST_F(RoomMapRecordTest, NullColumnsGiveTheRoomMapDefaults) {
 TEST_F(RoomMapRecordTest, MalformedStoredTextIsAnInputErrorNamingTheMap) {
   RoomMapRecord record = ToRecord(SomeMap(), plan());
   record.camera_response = "estimated: 0 1 2";  // 3 of 256 values
-  record.id = db_->AddRoomMap(record);
-  const std::string name = "room map " + std::to_string(record.id.value());
-  try {
-    FromRecord(*db_->GetRoomMap(record.id));
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find(name + ": stored camera response"), std::string::npos) << e.what();
-  }
+  ExpectReadRefused(record, ": stored camera response");
   record = ToRecord(SomeMap(), plan());
   record.depth_correction = "depth correction: 0.01 2 2 0 1 0 1 0.5";  // 1 of 4 grid values
-  record.id = db_->AddRoomMap(record);
-  try {
-    FromRecord(*db_->GetRoomMap(record.id));
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("room map " + std::to_string(record.id.value()) +
-                                         ": stored depth correction"),
-              std::string::npos)
-        << e.what();
-  }
+  ExpectReadRefused(record, ": stored depth correction");
 }
 
 // Localisation reads each landmark's descriptor as 32 bytes: a stored map
@@ -160,16 +157,7 @@ TEST_F(RoomMapRecordTest, MalformedStoredTextIsAnInputErrorNamingTheMap) {
 TEST_F(RoomMapRecordTest, StoredDescriptorsOfAnotherWidthAreAnInputErrorNamingTheMap) {
   RoomMapRecord record = ToRecord(SomeMap(), plan());
   record.landmark_descriptors = ByteMatrix::Constant(3, 16, 7);
-  record.id = db_->AddRoomMap(record);
-  try {
-    FromRecord(*db_->GetRoomMap(record.id));
-    FAIL() << "expected an InputError";
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("room map " + std::to_string(record.id.value()) +
-                                         ": 3 landmarks but a 3 x 16 descriptor matrix"),
-              std::string::npos)
-        << e.what();
-  }
+  ExpectReadRefused(record, ": 3 landmarks but a 3 x 16 descriptor matrix");
 }
 
 // The room's surface (schema 10) round-trips with its voxel size; a map
