@@ -167,6 +167,13 @@ struct CameraLocalizer::Impl {
   PoseCorrespondences corr;
   std::vector<int> match_of_keypoint;        // landmark per keypoint, -1
   std::vector<int> match_distance;
+  // This frame's number (Run counts them): the nearest two room landmarks
+  // of each keypoint a relocalisation found are kept for the frame's second
+  // one, with the body scan's landmarks, which searches them again.
+  std::uint64_t frame_serial = 0;
+  std::uint64_t shared_nearest_serial = 0;
+  std::vector<NearestTwo>
+      shared_nearest;  // per keypoint, over the room landmarks both searches cover
   // The landmarks a body scan placed (RoomMap::scan_landmarks) are matched
   // only while this is set: for frames the room map alone does not place.
   bool use_scan = false;
@@ -541,16 +548,31 @@ struct CameraLocalizer::Impl {
     const int n_kp = static_cast<int>(keypoints.size());
     match_of_keypoint.assign(n_kp, -1);
     match_distance.assign(n_kp, 257);
-    const int first = use_scan ? 0 : map.scan_landmarks;
-    const int n_landmarks =
-        std::min(map.num_landmarks(), first + options.relocalisation_max_landmarks);
+    const int scan = map.scan_landmarks;
+    const int first = use_scan ? 0 : scan;
+    const int last = std::min(map.num_landmarks(), first + options.relocalisation_max_landmarks);
+    // [first, last) in three consecutive parts; the middle one, the room
+    // landmarks [scan, shared_last), is the same for both searches of a
+    // frame (without and with the scan's landmarks) and searched once: the
+    // nearest two of consecutive parts merge into the nearest two of all.
+    const int shared_last =
+        std::max(scan, std::min(map.num_landmarks(), options.relocalisation_max_landmarks));
+    const int s1 = std::clamp(scan, first, std::max(first, last));
+    const int s2 = std::clamp(shared_last, s1, std::max(s1, last));
+    const bool have_shared =
+        shared_nearest_serial == frame_serial && static_cast<int>(shared_nearest.size()) == n_kp;
+    if (!have_shared) shared_nearest.assign(n_kp, NearestTwo());
     cv::parallel_for_(
         cv::Range(0, n_kp),
         [&](const cv::Range& range) {
           for (int i = range.start; i < range.end; ++i) {
             const std::uint8_t* d = keypoints.descriptors.ptr<std::uint8_t>(i);
-            const NearestTwo nearest =
-                NearestTwoOfRows(d, map.landmark_descriptors, first, n_landmarks);
+            if (!have_shared)
+              shared_nearest[i] = NearestTwoOfRows(d, map.landmark_descriptors, scan, shared_last);
+            const NearestTwo nearest = MergeNearestTwo(
+                MergeNearestTwo(NearestTwoOfRows(d, map.landmark_descriptors, first, s1),
+                                shared_nearest[i]),
+                NearestTwoOfRows(d, map.landmark_descriptors, s2, last));
             if (nearest.best < 0 || nearest.d1 > options.relocalisation_max_hamming ||
                 nearest.d1 > options.relocalisation_ratio * nearest.d2) {
               continue;
@@ -560,6 +582,7 @@ struct CameraLocalizer::Impl {
           }
         },
         2);
+    shared_nearest_serial = frame_serial;
     int n = 0;
     for (int i = 0; i < n_kp; ++i) n += match_of_keypoint[i] >= 0;
     return n;
@@ -1036,6 +1059,7 @@ LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame,
 LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
                                         const std::vector<MarkerObservation>* detections) {
   Impl& m = *impl_;
+  ++m.frame_serial;
   const bool given = detections != nullptr;
   LocalizationResult out;
   LocalizationTimings& tm = out.timings;

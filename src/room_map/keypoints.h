@@ -128,6 +128,23 @@ struct NearestTwo {
   }
 };
 
+/// The nearest two of rows offered as `earlier` and then as `later`, from
+/// the nearest two of each: what offering them all one by one gives (the
+/// first of equally near rows is `best`).
+inline NearestTwo MergeNearestTwo(const NearestTwo& earlier, const NearestTwo& later) {
+  NearestTwo out;
+  if (later.d1 < earlier.d1) {
+    out.best = later.best;
+    out.d1 = later.d1;
+    out.d2 = std::min(earlier.d1, later.d2);
+  } else {
+    out.best = earlier.best;
+    out.d1 = earlier.d1;
+    out.d2 = std::min(earlier.d2, later.d1);
+  }
+  return out;
+}
+
 /// Hamming distance of two 32-byte descriptors. On x86-64 with SSE2 only
 /// (Debian's baseline has no POPCNT instruction, so __builtin_popcountll
 /// becomes a bit-twiddling call per word): a byte-wise bit count in two

@@ -97,6 +97,34 @@ TEST(Keypoints, TheNearestTwoRowsAreTheSameWithAndWithoutAvx2) {
             << "\n";
 }
 
+TEST(Keypoints, TheNearestTwoOfConsecutiveRangesMergeIntoTheNearestTwoOfAll) {
+  // Distances with many ties (0-7), split at every place into two and into
+  // three consecutive ranges, empty ones included: merged, the same best
+  // row (the first of equal distances) and the same two distances as
+  // offering every row in order.
+  std::mt19937 random(5);
+  for (int trial = 0; trial < 300; ++trial) {
+    const int n = static_cast<int>(random() % 12);
+    std::vector<int> d(n);
+    for (int& x : d) x = static_cast<int>(random() % 8);
+    auto nearest = [&](int first, int last) {
+      NearestTwo out;
+      for (int l = first; l < last; ++l) out.Offer(l, d[l]);
+      return out;
+    };
+    const NearestTwo all = nearest(0, n);
+    for (int a = 0; a <= n; ++a) {
+      for (int b = a; b <= n; ++b) {
+        const NearestTwo merged =
+            MergeNearestTwo(MergeNearestTwo(nearest(0, a), nearest(a, b)), nearest(b, n));
+        ASSERT_EQ(merged.best, all.best) << "trial " << trial << " split " << a << ", " << b;
+        ASSERT_EQ(merged.d1, all.d1) << "trial " << trial << " split " << a << ", " << b;
+        ASSERT_EQ(merged.d2, all.d2) << "trial " << trial << " split " << a << ", " << b;
+      }
+    }
+  }
+}
+
 TEST(Keypoints, NearestTwoKeepsTheSmallestTwoDistancesWhateverTheOrder) {
   NearestTwo none;
   EXPECT_EQ(none.best, -1);
