@@ -273,6 +273,22 @@ fs::path TrackingStage::root_, TrackingStage::case_, TrackingStage::store_;
 // patient is tracked from them, near the truth, with the search on or off.
 // A run that lost many frames for one reason says which, and what to do; a
 // few lost frames are only counted.
+// The search over shifts from a hint keeps a shift for two refined
+// stickers: limited to one sticker a shift it could keep none.
+TEST(BodyTrackerOptionsCheck, TheHintSearchRefinesAllOrAtLeastTwoStickersAShift) {
+  BodyTrackerOptions o;
+  EXPECT_EQ(o.Validate(), "");
+  EXPECT_GE(o.hint_search_stickers, 2);
+  for (int n : {0, 2, 11}) {
+    o.hint_search_stickers = n;
+    EXPECT_EQ(o.Validate(), "") << n;
+  }
+  for (int n : {1, -1}) {
+    o.hint_search_stickers = n;
+    EXPECT_NE(o.Validate().find("hint_search_stickers"), std::string::npos) << n;
+  }
+}
+
 TEST(TrackingStageSummary, TheCommonestLossIsNamedWithWhatToDo) {
   TrackSequenceResult run;
   run.name = "seq_00";
