@@ -109,7 +109,7 @@ struct BodyTrackerOptions {
   /// all), the kept shift then every sticker: a patient whose stickers no
   /// shift refines (beyond their range) costs a frame 48 shifts of every
   /// sticker otherwise (measured on a random-conditions d435 sequence with
-  /// 11 stickers of 10-18 px: 514 refinements, ~130 ms a frame).
+  /// 11 stickers of 10-20 px: 514 refinements, ~130 ms a frame).
   double hint_search_step_mm = 2.0;
   int hint_search_steps = 3;
   int hint_search_stickers = 4;
