@@ -242,10 +242,12 @@ struct BodyTracker::Impl {
   // Mapped stickers not in `have` that the pose puts in view, refined
   // (edge lines) at their projected corners; kept when the fit converged
   // close to the projection.
-  // `largest` > 0: only that many stickers, the largest in view.
+  // `largest` > 0: only that many stickers, the largest in view. `need` > 0:
+  // stops once fewer than that many could be refined (what is found then
+  // is not used).
   void RefineAtPose(const Rigid3d& camera_from_model, const std::vector<int>& have,
                     const BodyTrackerOptions& o, std::vector<MarkerObservation>* found,
-                    int largest = 0) {
+                    int largest = 0, int need = 0) {
     found->clear();
     struct Candidate {
       int id;
@@ -277,7 +279,9 @@ struct BodyTracker::Impl {
                        [](const Candidate& a, const Candidate& b) { return a.side > b.side; });
       candidates.resize(largest);
     }
-    for (const Candidate& c : candidates) {
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      if (static_cast<int>(found->size() + candidates.size() - i) < need) break;
+      const Candidate& c = candidates[i];
       const CornerRefinementResult r =
           RefineMarkerCorners(gray, c.px, edge, undistorter, &workspace);
       if (r.status != MarkerStatus::kRefined) continue;
@@ -847,7 +851,9 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
             if (std::max(std::abs(ix), std::abs(iy)) != ring) continue;
             const Rigid3d shift(Eigen::Quaterniond::Identity(),
                                 Eigen::Vector3d(ix, iy, 0) * (o.hint_search_step_mm / 1000.0));
-            m.RefineAtPose(shift * fitted, have, o, &shifted, o.hint_search_stickers);
+            // A shift is kept for two stickers, and more than one kept before.
+            m.RefineAtPose(shift * fitted, have, o, &shifted, o.hint_search_stickers,
+                           std::max<int>(2, static_cast<int>(at_pose.size()) + 1));
             if (shifted.size() >= 2 && shifted.size() > at_pose.size()) {
               at_pose = shifted;
               pose = shift * fitted;
