@@ -167,13 +167,10 @@ struct CameraLocalizer::Impl {
   PoseCorrespondences corr;
   std::vector<int> match_of_keypoint;        // landmark per keypoint, -1
   std::vector<int> match_distance;
-  // This frame's number (Run counts them): the nearest two room landmarks
-  // of each keypoint a relocalisation found are kept for the frame's second
-  // one, with the body scan's landmarks, which searches them again.
-  std::uint64_t frame_serial = 0;
-  std::uint64_t shared_nearest_serial = 0;
-  std::vector<NearestTwo>
-      shared_nearest;  // per keypoint, over the room landmarks both searches cover
+  // Per keypoint of this frame (emptied by Run), the nearest two of the
+  // room landmarks both of its relocalisations cover, from the first: the
+  // second, with the body scan's landmarks, searches them again.
+  std::vector<NearestTwo> shared_nearest;
   // The landmarks a body scan placed (RoomMap::scan_landmarks) are matched
   // only while this is set: for frames the room map alone does not place.
   bool use_scan = false;
@@ -559,8 +556,7 @@ struct CameraLocalizer::Impl {
         std::max(scan, std::min(map.num_landmarks(), options.relocalisation_max_landmarks));
     const int s1 = std::clamp(scan, first, std::max(first, last));
     const int s2 = std::clamp(shared_last, s1, std::max(s1, last));
-    const bool have_shared =
-        shared_nearest_serial == frame_serial && static_cast<int>(shared_nearest.size()) == n_kp;
+    const bool have_shared = !shared_nearest.empty();
     if (!have_shared) shared_nearest.assign(n_kp, NearestTwo());
     cv::parallel_for_(
         cv::Range(0, n_kp),
@@ -582,7 +578,6 @@ struct CameraLocalizer::Impl {
           }
         },
         2);
-    shared_nearest_serial = frame_serial;
     int n = 0;
     for (int i = 0; i < n_kp; ++i) n += match_of_keypoint[i] >= 0;
     return n;
@@ -1059,7 +1054,7 @@ LocalizationResult CameraLocalizer::Localize(const RgbdFrame& frame,
 LocalizationResult CameraLocalizer::Run(const RgbdFrame& frame,
                                         const std::vector<MarkerObservation>* detections) {
   Impl& m = *impl_;
-  ++m.frame_serial;
+  m.shared_nearest.clear();
   const bool given = detections != nullptr;
   LocalizationResult out;
   LocalizationTimings& tm = out.timings;

@@ -156,6 +156,12 @@ struct BodyTracker::Impl {
   double usual_depth_fraction = -1;
 
   // Per-frame buffers.
+  struct RefineCandidate {  // RefineAtPose: a sticker in view, large enough
+    int id;
+    std::array<Eigen::Vector2d, 4> px;
+    double side;
+  };
+  std::vector<RefineCandidate> refine_candidates;
   std::vector<std::pair<int, float>> candidates;
   std::vector<int> cells;
   std::vector<int> visible;
@@ -249,12 +255,8 @@ struct BodyTracker::Impl {
                     const BodyTrackerOptions& o, std::vector<MarkerObservation>* found,
                     int largest = 0, int need = 0) {
     found->clear();
-    struct Candidate {
-      int id;
-      std::array<Eigen::Vector2d, 4> px;
-      double side;
-    };
-    std::vector<Candidate> candidates;
+    std::vector<RefineCandidate>& candidates = refine_candidates;
+    candidates.clear();
     for (const auto& [id, model_from_sticker] : model_from_marker) {
       if (std::find(have.begin(), have.end(), id) != have.end()) continue;
       const Rigid3d camera_from_sticker = camera_from_model * model_from_sticker;
@@ -275,13 +277,14 @@ struct BodyTracker::Impl {
       candidates.push_back({id, px, side});
     }
     if (largest > 0 && static_cast<int>(candidates.size()) > largest) {
-      std::stable_sort(candidates.begin(), candidates.end(),
-                       [](const Candidate& a, const Candidate& b) { return a.side > b.side; });
+      std::stable_sort(
+          candidates.begin(), candidates.end(),
+          [](const RefineCandidate& a, const RefineCandidate& b) { return a.side > b.side; });
       candidates.resize(largest);
     }
     for (size_t i = 0; i < candidates.size(); ++i) {
       if (static_cast<int>(found->size() + candidates.size() - i) < need) break;
-      const Candidate& c = candidates[i];
+      const RefineCandidate& c = candidates[i];
       const CornerRefinementResult r =
           RefineMarkerCorners(gray, c.px, edge, undistorter, &workspace);
       if (r.status != MarkerStatus::kRefined) continue;

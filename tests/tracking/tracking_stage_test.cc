@@ -265,14 +265,6 @@ class TrackingStage : public ::testing::Test {
 };
 fs::path TrackingStage::root_, TrackingStage::case_, TrackingStage::store_;
 
-// Starting from a hint 6-12 mm off, in a motion-blurred frame, with no
-// sticker read by ArUco (ids outside the detector's range): the stickers are
-// found where the surface fit puts them (and, where that is not within the
-// refinement's reach, by the search over shifts across the view: measured on
-// a `--hard` case, whose first 10 frames were lost without it) and the
-// patient is tracked from them, near the truth, with the search on or off.
-// A run that lost many frames for one reason says which, and what to do; a
-// few lost frames are only counted.
 // The search over shifts from a hint keeps a shift for two refined
 // stickers: limited to one sticker a shift it could keep none.
 TEST(BodyTrackerOptionsCheck, TheHintSearchRefinesAllOrAtLeastTwoStickersAShift) {
@@ -289,6 +281,14 @@ TEST(BodyTrackerOptionsCheck, TheHintSearchRefinesAllOrAtLeastTwoStickersAShift)
   }
 }
 
+// Starting from a hint 6-12 mm off, in a motion-blurred frame, with no
+// sticker read by ArUco (ids outside the detector's range): the stickers are
+// found where the surface fit puts them (and, where that is not within the
+// refinement's reach, by the search over shifts across the view: measured on
+// a `--hard` case, whose first 10 frames were lost without it) and the
+// patient is tracked from them, near the truth, with the search on or off.
+// A run that lost many frames for one reason says which, and what to do; a
+// few lost frames are only counted.
 TEST(TrackingStageSummary, TheCommonestLossIsNamedWithWhatToDo) {
   TrackSequenceResult run;
   run.name = "seq_00";
