@@ -8,13 +8,16 @@
 #include <unordered_set>
 
 #include <Eigen/Dense>
+#include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
+#include "features/marker_template.h"
 #include "geometry/cube_grid.h"
 #include "geometry/so3.h"
 #include "registration/mesh_cloud.h"
+#include "sensor/case_config.h"
 #include "sensor/depth_timing.h"
 #include "tracking/sticker_terms.h"
 #include "util/check.h"
@@ -66,6 +69,13 @@ std::string BodyTrackerOptions::Validate() const {
   }
   if (!(max_refinement_shift_px > 0) || !(max_refinement_shift_fraction >= 0)) {
     return "max_refinement_shift_px must be positive and max_refinement_shift_fraction not negative";
+  }
+  if (!(template_max_side_px >= 0) ||
+      !(template_max_shift_fraction > 0 && template_max_shift_fraction <= 1) ||
+      template_below_stickers < 0) {
+    return "template_max_side_px must not be negative, template_max_shift_fraction must be in (0, "
+           "1] and "
+           "template_below_stickers not negative";
   }
   if (max_frames_without_stickers < 0) return "max_frames_without_stickers must not be negative";
   if (!(min_depth_inlier_fraction >= 0 && min_depth_inlier_fraction <= 1)) {
@@ -140,6 +150,11 @@ struct BodyTracker::Impl {
   EdgeRefinementOptions edge;
   PixelUndistorter undistorter;
   EdgeRefinementWorkspace workspace;
+  // Stickers located by their whole pattern (RefineAtPose).
+  cv::Ptr<cv::aruco::Dictionary> dictionary;
+  std::map<int, cv::Mat> sticker_cells;
+  MarkerTemplateOptions template_options;
+  MarkerTemplateCache template_cache;
   std::vector<MarkerObservation> scratch;
   cv::Mat gray, window_up;
 
@@ -160,8 +175,10 @@ struct BodyTracker::Impl {
     int id;
     std::array<Eigen::Vector2d, 4> px;
     double side;
+    double depth;  // of its centre, m
   };
   std::vector<RefineCandidate> refine_candidates;
+  std::vector<size_t> pattern_candidates;
   std::vector<std::pair<int, float>> candidates;
   std::vector<int> cells;
   std::vector<int> visible;
@@ -247,13 +264,15 @@ struct BodyTracker::Impl {
 
   // Mapped stickers not in `have` that the pose puts in view, refined
   // (edge lines) at their projected corners; kept when the fit converged
-  // close to the projection.
+  // close to the projection. `patterns`: one whose edge lines do not fit
+  // (cells of a pixel or two) is located by its whole pattern, searched
+  // over a third of its side plus `reach_m` at its distance.
   // `largest` > 0: only that many stickers, the largest in view. `need` > 0:
   // stops once fewer than that many could be refined (what is found then
   // is not used).
   void RefineAtPose(const Rigid3d& camera_from_model, const std::vector<int>& have,
                     const BodyTrackerOptions& o, std::vector<MarkerObservation>* found,
-                    int largest = 0, int need = 0) {
+                    int largest = 0, int need = 0, bool patterns = true, double reach_m = 0) {
     found->clear();
     std::vector<RefineCandidate>& candidates = refine_candidates;
     candidates.clear();
@@ -274,7 +293,7 @@ struct BodyTracker::Impl {
       for (int c = 0; c < 4; ++c) perimeter += (px[(c + 1) % 4] - px[c]).norm();
       const double side = perimeter / 4;
       if (side < o.min_sticker_side_px) continue;
-      candidates.push_back({id, px, side});
+      candidates.push_back({id, px, side, centre.z()});
     }
     if (largest > 0 && static_cast<int>(candidates.size()) > largest) {
       std::stable_sort(
@@ -282,18 +301,69 @@ struct BodyTracker::Impl {
           [](const RefineCandidate& a, const RefineCandidate& b) { return a.side > b.side; });
       candidates.resize(largest);
     }
+    pattern_candidates.clear();
     for (size_t i = 0; i < candidates.size(); ++i) {
       if (static_cast<int>(found->size() + candidates.size() - i) < need) break;
       const RefineCandidate& c = candidates[i];
       const CornerRefinementResult r =
           RefineMarkerCorners(gray, c.px, edge, undistorter, &workspace);
-      if (r.status != MarkerStatus::kRefined) continue;
+      if (r.status != MarkerStatus::kRefined) {
+        if (patterns && c.side <= o.template_max_side_px) pattern_candidates.push_back(i);
+        continue;
+      }
       double shift = 0;
       for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
       if (shift > std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * c.side))
         continue;
       found->push_back(Refined(c.id, c.px, r));
     }
+    // Those whose edge lines did not fit, by their whole pattern (the
+    // largest first), while the frame holds fewer than
+    // `template_below_stickers`.
+    std::stable_sort(pattern_candidates.begin(), pattern_candidates.end(),
+                     [&](size_t a, size_t b) { return candidates[a].side > candidates[b].side; });
+    for (const size_t i : pattern_candidates) {
+      if (static_cast<int>(have.size() + found->size()) >= o.template_below_stickers) break;
+      const RefineCandidate& c = candidates[i];
+      // Searched over the window the pose's own uncertainty spans; a sticker
+      // found by its pattern is that sticker (its bits fit, not its turns),
+      // so it may lie that far from the projection.
+      const double radius = o.template_max_shift_fraction * c.side + K.fx * reach_m / c.depth;
+      const CornerRefinementResult r = FromPattern(c, radius);
+      if (r.status != MarkerStatus::kRefined) continue;
+      double shift = 0;
+      for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
+      if (shift > radius + o.max_refinement_shift_px) continue;
+      found->push_back(Refined(c.id, c.px, r));
+    }
+  }
+
+  // A sticker whose edge lines could not be fitted, located by its whole
+  // pattern from its projected corners.
+  CornerRefinementResult FromPattern(const RefineCandidate& c, double search_radius_px) {
+    CornerRefinementResult r;
+    auto cells = sticker_cells.find(c.id);
+    if (cells == sticker_cells.end()) {
+      cv::Mat drawn;
+      cv::aruco::drawMarker(dictionary, c.id, edge.marker_bits + 2 * edge.border_bits, drawn,
+                            edge.border_bits);
+      cells = sticker_cells.emplace(c.id, drawn).first;
+    }
+    template_options.search_radius_px = search_radius_px;
+    const MarkerTemplateResult t =
+        FitMarkerTemplate(gray, cells->second, c.px, template_options, &template_cache);
+    if (!t.ok) {
+      r.failure = t.failure;
+      return r;
+    }
+    r.status = MarkerStatus::kRefined;
+    r.corners_px = t.corners_px;
+    r.corner_sigma_px = t.corner_sigma_px;
+    r.edge_inlier_fraction = 1;
+    r.contrast_grey = t.contrast_grey;
+    r.blur_sigma_px = t.blur_sigma_px;
+    r.noise_sigma_grey = t.noise_sigma_grey;
+    return r;
   }
 
   // Share of the coarse model points facing the camera (in the image, with a
@@ -422,6 +492,10 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
   m.coarse = std::make_unique<MarkerDetector>(coarse);
   m.edge = options_.detector.edge;
   m.edge.marker_bits = m.detector->marker_bits();
+  m.dictionary =
+      cv::aruco::getPredefinedDictionary(ArucoDictionaryId(options_.detector.dictionary));
+  m.template_options.response = m.edge.response;
+  m.template_options.quiet_zone_cells = m.edge.quiet_zone_cells;
   m.undistorter = PixelUndistorter(intrinsics);
 }
 
@@ -830,7 +904,11 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
       if (use[si]) have.push_back(stickers[si].id);
     }
     std::vector<MarkerObservation> at_pose;
-    m.RefineAtPose(pose, have, o, &at_pose);
+    // From a hint, stickers located by their pattern are searched as far
+    // as the rings below reach.
+    m.RefineAtPose(
+        pose, have, o, &at_pose, 0, 0, true,
+        from_hint && carried ? o.hint_search_steps * o.hint_search_step_mm / 1000.0 : 0.0);
     if (at_pose.empty() && carried && from_hint && o.hint_search_steps > 0) {
       // From a hint the surface alone places the patient to a few mm along
       // the body (measured: stickers of 12 px not refined for the first 10
@@ -856,7 +934,7 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
                                 Eigen::Vector3d(ix, iy, 0) * (o.hint_search_step_mm / 1000.0));
             // A shift is kept for two stickers, and more than one kept before.
             m.RefineAtPose(shift * fitted, have, o, &shifted, o.hint_search_stickers,
-                           std::max<int>(2, static_cast<int>(at_pose.size()) + 1));
+                           std::max<int>(2, static_cast<int>(at_pose.size()) + 1), false);
             if (shifted.size() >= 2 && shifted.size() > at_pose.size()) {
               at_pose = shifted;
               pose = shift * fitted;

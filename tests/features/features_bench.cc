@@ -11,10 +11,13 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/aruco.hpp>
+
 #include "features/corner_study.h"
 #include "features/edge_refinement.h"
 #include "features/marker_detector.h"
 #include "features/marker_render.h"
+#include "features/marker_template.h"
 #include "features/response_from_recording.h"
 
 namespace arpos::testing {
@@ -271,6 +274,46 @@ void BM_RefineOnePerMarker(benchmark::State& state) {
 }
 BENCHMARK(BM_RefineOnePerMarker)
     ->ArgsProduct({{15, 30, 60, 120}, {0, 10}})
+    ->Unit(benchmark::kMicrosecond);
+
+// A 6x6 sticker located by its whole pattern (marker_template.h), started
+// 1.5 px off. range(0): its side (px); range(1): the search radius (px);
+// range(2): 1 = the blurred patterns kept between fits (as a tracker does
+// for the same sticker frame after frame), 0 = made anew each fit.
+void BM_MarkerTemplate(benchmark::State& state) {
+  const double side = static_cast<double>(state.range(0));
+  const CameraIntrinsics cam = VgaCamera();
+  std::mt19937 rng(5);
+  MarkerPlacement m;
+  m.id = 17;
+  m.camera_from_marker = MarkerPoseForView(cam, {320.3, 240.6}, side, 0.03, 25, &rng);
+  std::vector<MarkerTruth> truth;
+  RenderOptions render;
+  render.dictionary = "DICT_6X6_250";
+  render.gamma = 2.2;
+  const cv::Mat img = RenderMarkers(cam, {m}, render, &rng, &truth);
+  std::array<Eigen::Vector2d, 4> start = truth[0].corners_px;
+  for (auto& c : start) c += Eigen::Vector2d(1.2, -0.9);
+  cv::Mat cells;
+  cv::aruco::drawMarker(cv::aruco::getPredefinedDictionary(cv::aruco::DICT_6X6_250), m.id, 8, cells,
+                        1);
+  MarkerTemplateOptions options;
+  options.response = CameraResponse::Gamma(2.2);
+  options.search_radius_px = static_cast<double>(state.range(1));
+  MarkerTemplateCache cache;
+  double error = 0;
+  for (auto _ : state) {
+    const MarkerTemplateResult r =
+        FitMarkerTemplate(img, cells, start, options, state.range(2) ? &cache : nullptr);
+    error = r.ok ? (r.corners_px[0] - truth[0].corners_px[0]).norm() : -1;
+    state.counters["iterations"] = r.iterations;
+    state.counters["pixels"] = r.pixels;
+    benchmark::DoNotOptimize(r.corners_px[0]);
+  }
+  state.counters["corner0_error_px"] = error;
+}
+BENCHMARK(BM_MarkerTemplate)
+    ->ArgsProduct({{12, 18, 26}, {0, 5}, {0, 1}})
     ->Unit(benchmark::kMicrosecond);
 
 }  // namespace

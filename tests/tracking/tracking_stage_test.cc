@@ -281,6 +281,22 @@ TEST(BodyTrackerOptionsCheck, TheHintSearchRefinesAllOrAtLeastTwoStickersAShift)
   }
 }
 
+TEST(BodyTrackerOptionsCheck, StickersFoundByTheirPatternsAreSearchedWithinTheirSide) {
+  BodyTrackerOptions o;
+  for (double f : {0.0, -0.1, 1.5, std::nan("")}) {
+    o.template_max_shift_fraction = f;
+    EXPECT_NE(o.Validate().find("template_max_shift_fraction"), std::string::npos) << f;
+  }
+  o = BodyTrackerOptions();
+  o.template_max_side_px = 0;  // off
+  EXPECT_EQ(o.Validate(), "");
+  o.template_max_side_px = -1;
+  EXPECT_NE(o.Validate().find("template_max_side_px"), std::string::npos);
+  o = BodyTrackerOptions();
+  o.template_below_stickers = -1;
+  EXPECT_NE(o.Validate().find("template_below_stickers"), std::string::npos);
+}
+
 // Starting from a hint 6-12 mm off, in a motion-blurred frame, with no
 // sticker read by ArUco (ids outside the detector's range): the stickers are
 // found where the surface fit puts them (and, where that is not within the
@@ -338,6 +354,49 @@ TEST_F(TrackingStage, AHintAFewMillimetresOffFindsTheStickersWithoutArUco) {
       // Against the truth: within the session's own error on the sample (~1.5 mm).
       EXPECT_LT((r.camera_from_model.translation - truth.translation).norm(), 0.004) << offset.transpose();
     }
+  }
+}
+
+// Stickers whose cells span a pixel or two: the sample's first frame as a
+// camera of a third of its resolution sees it (each 3 x 3 block averaged,
+// then enlarged back), which ArUco does not read (nor is it allowed to
+// here) and whose edge lines do not fit; from a prediction a few
+// millimetres off, their whole patterns place the patient.
+TEST_F(TrackingStage, StickersTooSmallForTheirEdgeLinesAreFoundByTheirPatterns) {
+  const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
+  const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
+  const TrackingInputs inputs = SampleInputs();
+  TrackerOptions options = MakeTrackerOptions(config, inputs);
+  options.body.detector.id_ranges = {{900, 950}};  // ArUco reads no sticker
+  const Rigid3d truth = sample.CameraGroundTruth()->front().room_from_x.Inverse() *
+                        sample.BodyGroundTruth()->front().room_from_x;
+  RgbdFrame frame = sample.LoadFrame(0, config.camera);
+  cv::Mat small;
+  cv::resize(frame.color, small, cv::Size(), 1.0 / 3, 1.0 / 3, cv::INTER_AREA);
+  cv::resize(small, frame.color, frame.color.size(), 0, 0, cv::INTER_LINEAR);
+  for (const Eigen::Vector3d& offset :
+       {Eigen::Vector3d(0.003, 0, 0), Eigen::Vector3d(0, -0.004, 0.002)}) {
+    const Rigid3d hint = Rigid3d(Eigen::Quaterniond::Identity(), offset) * truth;
+    int found[2] = {0, 0};
+    for (int patterns = 0; patterns < 2; ++patterns) {
+      BodyTrackerOptions body = options.body;
+      if (!patterns) body.template_max_side_px = 0;
+      BodyTracker tracker(inputs.model, inputs.model_from_marker, config.camera, body);
+      const BodyPoseResult r = tracker.Track(frame, hint);
+      found[patterns] = r.stickers_refined_at_pose;
+      if (!patterns) continue;
+      ASSERT_TRUE(r.ok) << "offset " << offset.transpose() << ": " << r.message;
+      EXPECT_EQ(r.source, BodyPoseSource::kStickers);
+      // Against the truth: within the session's own error on the sample (~1.5 mm).
+      EXPECT_LT((r.camera_from_model.translation - truth.translation).norm(), 0.004)
+          << offset.transpose();
+    }
+    std::printf(
+        "offset (%.0f, %.0f, %.0f) mm: %d stickers refined by their edge lines alone, %d with "
+        "their patterns\n",
+        offset.x() * 1000, offset.y() * 1000, offset.z() * 1000, found[0], found[1]);
+    EXPECT_LT(found[0], 2);
+    EXPECT_GE(found[1], 2);
   }
 }
 
