@@ -27,7 +27,9 @@ struct MarkerTemplateOptions {
   /// Width of the white quiet zone around the black square, in cells (the
   /// print's guaranteed margin); beyond it the surroundings' own level.
   double quiet_zone_cells = 1.0;
-  /// The camera's response: codes are read through it as linear values.
+  /// The camera's response: codes are read through it as linear values
+  /// (a camera's own sharpening is not undone: on cells of a pixel or two
+  /// it is part of the blur the fit chooses).
   CameraResponse response;
   /// How far beyond the quiet zone the fit reads the surroundings (cells):
   /// none (their level still enters through the blur). Measured on exact

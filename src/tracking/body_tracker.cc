@@ -73,9 +73,8 @@ std::string BodyTrackerOptions::Validate() const {
   if (!(template_max_side_px >= 0) ||
       !(template_max_shift_fraction > 0 && template_max_shift_fraction <= 1) ||
       template_below_stickers < 0) {
-    return "template_max_side_px must not be negative, template_max_shift_fraction must be in (0, "
-           "1] and "
-           "template_below_stickers not negative";
+    return "template_max_side_px must not be negative, template_max_shift_fraction must be in "
+           "(0, 1] and template_below_stickers not negative";
   }
   if (max_frames_without_stickers < 0) return "max_frames_without_stickers must not be negative";
   if (!(min_depth_inlier_fraction >= 0 && min_depth_inlier_fraction <= 1)) {
