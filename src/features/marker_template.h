@@ -28,8 +28,8 @@ struct MarkerTemplateOptions {
   /// print's guaranteed margin); beyond it the surroundings' own level.
   double quiet_zone_cells = 1.0;
   /// The camera's response: codes are read through it as linear values
-  /// (a camera's own sharpening is not undone: on cells of a pixel or two
-  /// it is part of the blur the fit chooses).
+  /// (a camera's own sharpening is not undone, nor was the fit measured on
+  /// a sharpening camera's images).
   CameraResponse response;
   /// How far beyond the quiet zone the fit reads the surroundings (cells):
   /// none (their level still enters through the blur). Measured on exact
