@@ -28,8 +28,9 @@ struct MarkerTemplateOptions {
   /// print's guaranteed margin); beyond it the surroundings' own level.
   double quiet_zone_cells = 1.0;
   /// The camera's response: codes are read through it as linear values
-  /// (a camera's own sharpening is not undone, nor was the fit measured on
-  /// a sharpening camera's images).
+  /// (a camera's own sharpening is not undone: on the exact renders of
+  /// marker_template_test, unsharp masking of 0.5 and 1.0 gave 0.15 and
+  /// 0.14 px RMS against 0.16 without).
   CameraResponse response;
   /// How far beyond the quiet zone the fit reads the surroundings (cells):
   /// none (their level still enters through the blur). Measured on exact
