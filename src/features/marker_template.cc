@@ -60,31 +60,56 @@ struct Template {
   double margin = 0;
   int rate = 8;
   int size = 0;
-  cv::Mat white, outside, white_s, white_t, outside_s, outside_t;  // CV_32F
+  cv::Mat white, outside;  // CV_32F
+  // Interleaved for sampling: white, outside (and, once AddGradients ran,
+  // their derivatives in s and t).
+  std::vector<float> table2, table6;
+
+  void Interleave() {
+    table2.resize(static_cast<size_t>(size) * size * 2);
+    for (int y = 0; y < size; ++y) {
+      const float* w = white.ptr<float>(y);
+      const float* o = outside.ptr<float>(y);
+      float* dst = &table2[static_cast<size_t>(y) * size * 2];
+      for (int x = 0; x < size; ++x) dst[2 * x] = w[x], dst[2 * x + 1] = o[x];
+    }
+  }
 
   void AddGradients() {
-    if (!white_s.empty()) return;
+    if (!table6.empty()) return;
     const float half = 0.5f * static_cast<float>(rate);
     const cv::Mat kx = (cv::Mat_<float>(1, 3) << -half, 0.f, half);
     const cv::Mat ky = kx.t();
-    cv::filter2D(white, white_s, CV_32F, kx, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
-    cv::filter2D(white, white_t, CV_32F, ky, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
-    cv::filter2D(outside, outside_s, CV_32F, kx, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
-    cv::filter2D(outside, outside_t, CV_32F, ky, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
+    cv::Mat d[4];
+    cv::filter2D(white, d[0], CV_32F, kx, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
+    cv::filter2D(white, d[1], CV_32F, ky, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
+    cv::filter2D(outside, d[2], CV_32F, kx, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
+    cv::filter2D(outside, d[3], CV_32F, ky, cv::Point(-1, -1), 0, cv::BORDER_REPLICATE);
+    table6.resize(static_cast<size_t>(size) * size * 6);
+    for (int y = 0; y < size; ++y) {
+      const float* src[6] = {white.ptr<float>(y), outside.ptr<float>(y), d[0].ptr<float>(y),
+                             d[1].ptr<float>(y),  d[2].ptr<float>(y),    d[3].ptr<float>(y)};
+      float* dst = &table6[static_cast<size_t>(y) * size * 6];
+      for (int x = 0; x < size; ++x) {
+        for (int k = 0; k < 6; ++k) dst[6 * x + k] = src[k][x];
+      }
+    }
   }
 
   // Bilinear samples at (s, t) in cells (`count` 2: the levels' indicators
-  // only, 6: with their gradients); false outside the table.
+  // only, 6: with their gradients, after AddGradients); false outside the
+  // table.
   bool Sample(double s, double t, float out[6], int count = 6) const {
     const double fx = (s + margin) * rate - 0.5, fy = (t + margin) * rate - 0.5;
     const int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
     if (x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size) return false;
     const float ax = static_cast<float>(fx - x0), ay = static_cast<float>(fy - y0);
-    const cv::Mat* images[6] = {&white, &outside, &white_s, &white_t, &outside_s, &outside_t};
+    const float* r0 = (count == 2 ? table2.data() : table6.data()) +
+                      (static_cast<size_t>(y0) * size + x0) * count;
+    const float* r1 = r0 + static_cast<size_t>(size) * count;
     for (int k = 0; k < count; ++k) {
-      const float* r0 = images[k]->ptr<float>(y0) + x0;
-      const float* r1 = images[k]->ptr<float>(y0 + 1) + x0;
-      out[k] = (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
+      out[k] = (1 - ay) * ((1 - ax) * r0[k] + ax * r0[count + k]) +
+               ay * ((1 - ax) * r1[k] + ax * r1[count + k]);
     }
     return true;
   }
@@ -119,6 +144,7 @@ Template MakeTemplate(const cv::Mat& cells, double quiet_zone, double extent, do
   const int k = 2 * static_cast<int>(std::ceil(3 * sigma)) + 1;
   cv::GaussianBlur(T.white, T.white, cv::Size(k, k), sigma, sigma, cv::BORDER_REPLICATE);
   cv::GaussianBlur(T.outside, T.outside, cv::Size(k, k), sigma, sigma, cv::BORDER_REPLICATE);
+  T.Interleave();
   return T;
 }
 
