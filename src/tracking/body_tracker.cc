@@ -307,19 +307,18 @@ struct BodyTracker::Impl {
       const RefineCandidate& c = candidates[i];
       const CornerRefinementResult r =
           RefineMarkerCorners(gray, c.px, edge, undistorter, &workspace);
-      if (r.status != MarkerStatus::kRefined) {
+      double shift = 0;
+      for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
+      if (r.status != MarkerStatus::kRefined ||
+          shift > std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * c.side)) {
         if (patterns && c.side <= o.template_max_side_px) pattern_candidates.push_back(i);
         continue;
       }
-      double shift = 0;
-      for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
-      if (shift > std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * c.side))
-        continue;
       found->push_back(Refined(c.id, c.px, r));
     }
-    // Those whose edge lines did not fit, by their whole pattern (the
-    // largest first), while the frame holds fewer than
-    // `template_below_stickers`.
+    // Those whose edge lines did not fit (or fitted beyond their reach), by
+    // their whole pattern (the largest first), while the frame holds fewer
+    // than `template_below_stickers`.
     std::stable_sort(pattern_candidates.begin(), pattern_candidates.end(),
                      [&](size_t a, size_t b) { return candidates[a].side > candidates[b].side; });
     for (const size_t i : pattern_candidates) {
