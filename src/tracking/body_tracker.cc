@@ -72,9 +72,9 @@ std::string BodyTrackerOptions::Validate() const {
   }
   if (!(template_max_side_px >= 0) ||
       !(template_max_shift_fraction > 0 && template_max_shift_fraction <= 1) ||
-      template_below_stickers < 0) {
+      template_below_stickers < 0 || template_max_misses < 1) {
     return "template_max_side_px must not be negative, template_max_shift_fraction must be in "
-           "(0, 1] and template_below_stickers not negative";
+           "(0, 1], template_below_stickers not negative and template_max_misses at least 1";
   }
   if (max_frames_without_stickers < 0) return "max_frames_without_stickers must not be negative";
   if (!(min_depth_inlier_fraction >= 0 && min_depth_inlier_fraction <= 1)) {
@@ -321,18 +321,23 @@ struct BodyTracker::Impl {
     // than `template_below_stickers`.
     std::stable_sort(pattern_candidates.begin(), pattern_candidates.end(),
                      [&](size_t a, size_t b) { return candidates[a].side > candidates[b].side; });
+    int misses = 0;
     for (const size_t i : pattern_candidates) {
       if (static_cast<int>(have.size() + found->size()) >= o.template_below_stickers) break;
+      if (misses >= o.template_max_misses) break;
       const RefineCandidate& c = candidates[i];
       // Searched over the window the pose's own uncertainty spans; a sticker
       // found by its pattern is that sticker (its bits fit, not its turns),
       // so it may lie that far from the projection.
       const double radius = o.template_max_shift_fraction * c.side + K.fx * reach_m / c.depth;
       const CornerRefinementResult r = FromPattern(c, radius);
-      if (r.status != MarkerStatus::kRefined) continue;
       double shift = 0;
       for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
-      if (shift > radius + o.max_refinement_shift_px) continue;
+      if (r.status != MarkerStatus::kRefined || shift > radius + o.max_refinement_shift_px) {
+        ++misses;
+        continue;
+      }
+      misses = 0;
       found->push_back(Refined(c.id, c.px, r));
     }
   }

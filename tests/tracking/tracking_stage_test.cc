@@ -295,6 +295,9 @@ TEST(BodyTrackerOptionsCheck, StickersFoundByTheirPatternsAreSearchedWithinTheir
   o = BodyTrackerOptions();
   o.template_below_stickers = -1;
   EXPECT_NE(o.Validate().find("template_below_stickers"), std::string::npos);
+  o = BodyTrackerOptions();
+  o.template_max_misses = 0;
+  EXPECT_NE(o.Validate().find("template_max_misses"), std::string::npos);
 }
 
 // Starting from a hint 6-12 mm off, in a motion-blurred frame, with no
