@@ -101,8 +101,9 @@ struct Template {
   // table.
   bool Sample(double s, double t, float out[6], int count = 6) const {
     const double fx = (s + margin) * rate - 0.5, fy = (t + margin) * rate - 0.5;
-    const int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
-    if (x0 < 0 || y0 < 0 || x0 + 1 >= size || y0 + 1 >= size) return false;
+    // (Checked before any cast: a degenerate homography gives NaN.)
+    if (!(fx >= 0 && fy >= 0 && fx < size - 1 && fy < size - 1)) return false;
+    const int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
     const float ax = static_cast<float>(fx - x0), ay = static_cast<float>(fy - y0);
     const float* r0 = (count == 2 ? table2.data() : table6.data()) +
                       (static_cast<size_t>(y0) * size + x0) * count;
@@ -244,6 +245,10 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
   const double extent = o.quiet_zone_cells + o.surround_cells;
 
   std::array<Eigen::Vector2d, 4> corners = initial_px;
+  if (!HomographyOf(corners, n).allFinite()) {
+    out.failure = "corners not a quadrilateral";
+    return out;
+  }
   if (o.search_radius_px > 0) {
     // The pattern as the start's corners project it, correlated with the
     // image over shifts of up to the radius: the fits below start from the
@@ -258,6 +263,11 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
       box.extend(Apply(H, s, t));
     }
     const int r = static_cast<int>(std::ceil(o.search_radius_px));
+    if (!(box.min().x() - r >= 0 && box.min().y() - r >= 0 && box.max().x() + r + 1 < gray.cols &&
+          box.max().y() + r + 1 < gray.rows)) {
+      out.failure = "the marker and its surroundings are not inside the image";
+      return out;
+    }
     const cv::Rect patch(static_cast<int>(std::floor(box.min().x())),
                          static_cast<int>(std::floor(box.min().y())),
                          static_cast<int>(std::ceil(box.max().x())) -
@@ -330,6 +340,10 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
                                {n + extent, n + extent},
                                {-extent, n + extent}}) {
       box.extend(Apply(H, s, t));
+    }
+    if (!(box.min().x() > -1 && box.min().y() > -1 && box.max().x() < gray.cols &&
+          box.max().y() < gray.rows)) {
+      return false;
     }
     const int x0 = static_cast<int>(std::ceil(box.min().x())),
               y0 = static_cast<int>(std::ceil(box.min().y()));

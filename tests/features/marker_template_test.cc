@@ -181,6 +181,16 @@ TEST(MarkerTemplate, StatesWhyOnInputItCannotUse) {
   auto nan = corners;
   nan[2].x() = std::nan("");
   EXPECT_FALSE(FitMarkerTemplate(gray, cells, nan).ok);
+  // Three corners on a line: no quadrilateral, said, searched or not.
+  const std::array<Eigen::Vector2d, 4> line{Eigen::Vector2d(40, 40), Eigen::Vector2d(50, 40),
+                                            Eigen::Vector2d(60, 40), Eigen::Vector2d(45, 52)};
+  for (double radius : {0.0, 4.0}) {
+    MarkerTemplateOptions searching;
+    searching.search_radius_px = radius;
+    const MarkerTemplateResult degenerate = FitMarkerTemplate(gray, cells, line, searching);
+    EXPECT_FALSE(degenerate.ok);
+    EXPECT_FALSE(degenerate.failure.empty());
+  }
   // A flat grey patch: no contrast.
   const MarkerTemplateResult flat = FitMarkerTemplate(gray, cells, corners);
   EXPECT_FALSE(flat.ok);
