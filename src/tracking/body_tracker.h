@@ -154,18 +154,18 @@ struct BodyTrackerOptions {
   double detection_side_px = 30;
   double min_sticker_side_px = 6;
   /// A sticker refined where the pose puts it whose edge lines cannot be
-  /// fitted (cells of a pixel or two) and whose side is at most this (px) is
-  /// located by its whole pattern instead (features/marker_template.h); 0:
-  /// never. It is searched over `template_max_shift_fraction` of its side
-  /// (and, from a hint, as far as the hint search's rings reach) and kept
-  /// when found within it; the largest first, only while the frame holds
-  /// fewer stickers than `template_below_stickers`. Measured over 50
-  /// random-conditions sequences: the frames lost 21.7 -> 16.9 % with
-  /// every such sticker; with 2 (a frame kept from being lost or carried
-  /// on its surface alone) the same frames tracked, while every sticker
-  /// made the patient in the camera worse on the frames both tracked (its
-  /// stickers carry the session's placement of the model, the surface
-  /// does not).
+  /// fitted (cells of a pixel or two), or fitted beyond their reach, and
+  /// whose side is at most this (px) is located by its whole pattern
+  /// instead (features/marker_template.h); 0: never. It is searched over
+  /// `template_max_shift_fraction` of its side (and, from a hint, as far as
+  /// the hint search's rings reach) and kept when found within it; the
+  /// largest first, only while the frame holds fewer stickers than
+  /// `template_below_stickers`. Measured over 50 random-conditions
+  /// sequences: the frames lost 21.7 -> 16.9 % with every such sticker,
+  /// 16.3 % with 2 (a frame kept from being lost or carried on its surface
+  /// alone); every sticker made the patient in the camera worse on the
+  /// frames both tracked (1.47 -> 1.58 mm; with 2, 1.48: the stickers carry
+  /// the session's placement of the model, the surface does not).
   double template_max_side_px = 30;
   double template_max_shift_fraction = 0.35;
   int template_below_stickers = 2;
