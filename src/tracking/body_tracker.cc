@@ -342,8 +342,8 @@ struct BodyTracker::Impl {
     }
   }
 
-  // A sticker whose edge lines could not be fitted, located by its whole
-  // pattern from its projected corners.
+  // A sticker whose edge lines could not be fitted (or fitted beyond their
+  // reach), located by its whole pattern from its projected corners.
   CornerRefinementResult FromPattern(const RefineCandidate& c, double search_radius_px) {
     CornerRefinementResult r;
     auto cells = sticker_cells.find(c.id);
@@ -937,8 +937,9 @@ BodyPoseResult BodyTracker::TrackOnce(const RgbdFrame& frame, const std::optiona
             const Rigid3d shift(Eigen::Quaterniond::Identity(),
                                 Eigen::Vector3d(ix, iy, 0) * (o.hint_search_step_mm / 1000.0));
             // A shift is kept for two stickers, and more than one kept before.
-            // Stickers small enough for their patterns were searched as far
-            // as the rings reach already (measured: over 24 random-conditions
+            // Stickers small enough for their patterns were searched by them
+            // as far as the rings reach already (the largest four at least,
+            // `template_max_misses`; measured: over 24 random-conditions
             // sequences that lose the patient, the poses identical to the
             // byte with or without them here).
             m.RefineAtPose(shift * fitted, have, o, &shifted, o.hint_search_stickers,
