@@ -349,7 +349,6 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
               y0 = static_cast<int>(std::ceil(box.min().y()));
     const int x1 = static_cast<int>(std::floor(box.max().x())),
               y1 = static_cast<int>(std::floor(box.max().y()));
-    if (x0 < 0 || y0 < 0 || x1 >= gray.cols || y1 >= gray.rows) return false;
     for (int y = y0; y <= y1; ++y) {
       const uchar* row = gray.ptr<uchar>(y);
       for (int x = x0; x <= x1; ++x) {
@@ -530,16 +529,35 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
   out.corners_px = corners;
   out.pixels = static_cast<int>(pixels.size());
 
-  // Uncertainty, noise and the plain black square for comparison.
+  // Noise and contrast at the corners found; the cheap checks first (a
+  // refused fit, most of a frame's misses, skips the rest).
   const double cell_px = side / n;
   const double sigma_cells = std::sqrt(best_blur * best_blur + 1.0 / 12) / cell_px;
   const std::shared_ptr<Template> held =
       templates.Get(cells, o.quiet_zone_cells, extent, sigma_cells);
   held->AddGradients();
   const Template& T = *held;
-  const Eigen::Matrix3d H = HomographyOf(corners, n);
-  const Eigen::Matrix3d G = H.inverse();
+  const Eigen::Matrix3d G = HomographyOf(corners, n).inverse();
   const double cost = SolveLevels(pixels, T, G, &levels);
+  const int dof = static_cast<int>(pixels.size()) - 11;
+  if (dof < 10) {
+    out.failure = "too few pixels";
+    return out;
+  }
+  out.noise_sigma_grey = std::sqrt(cost / dof);
+  out.contrast_grey = levels(1);
+  double moved = 0;
+  for (int c = 0; c < 4; ++c) moved = std::max(moved, (corners[c] - initial_px[c]).norm());
+  if (!(moved <= o.max_shift_fraction * side + o.search_radius_px)) {
+    out.failure = "the fit left the start";
+  } else if (!Physical(levels)) {
+    out.failure = "black and white levels out of the codes' range";
+  } else if (!(out.contrast_grey >= o.min_contrast_grey)) {
+    out.failure = "too little contrast";
+  } else if (!(out.contrast_grey >= o.min_contrast_to_noise * out.noise_sigma_grey)) {
+    out.failure = "contrast too low for the residual noise";
+  }
+  if (!out.failure.empty()) return out;
   // The same marker turned by a quarter, a half, three quarters: its bits,
   // not a dark square (whose turns are alike), must be what fits.
   double turned_cost = std::numeric_limits<double>::infinity();
@@ -552,14 +570,11 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
         SolveLevels(pixels, *templates.Get(turned, o.quiet_zone_cells, extent, sigma_cells), G,
                     &turned_levels));
   }
-  const int dof = static_cast<int>(pixels.size()) - 11;
-  if (dof < 10) {
-    out.failure = "too few pixels";
+  out.pattern_gain = turned_cost / std::max(cost, 1e-12);
+  if (!(out.pattern_gain >= o.min_pattern_gain)) {
+    out.failure = "the pattern does not fit better than the same marker turned";
     return out;
   }
-  out.noise_sigma_grey = std::sqrt(cost / dof);
-  out.contrast_grey = levels(1);
-  out.pattern_gain = turned_cost / std::max(cost, 1e-12);
   {
     // The corners' covariance through the inverse homography's.
     Eigen::Matrix3d Gn = G / G(2, 2);
@@ -593,21 +608,7 @@ MarkerTemplateResult FitMarkerTemplate(const cv::Mat& gray, const cv::Mat& cells
           std::max(o.min_corner_sigma_px, std::sqrt(std::max(0.0, eig.eigenvalues()(1))));
     }
   }
-  double moved = 0;
-  for (int c = 0; c < 4; ++c) moved = std::max(moved, (corners[c] - initial_px[c]).norm());
-  if (!(moved <= o.max_shift_fraction * side + o.search_radius_px)) {
-    out.failure = "the fit left the start";
-  } else if (!Physical(levels)) {
-    out.failure = "black and white levels out of the codes' range";
-  } else if (!(out.contrast_grey >= o.min_contrast_grey)) {
-    out.failure = "too little contrast";
-  } else if (!(out.contrast_grey >= o.min_contrast_to_noise * out.noise_sigma_grey)) {
-    out.failure = "contrast too low for the residual noise";
-  } else if (!(out.pattern_gain >= o.min_pattern_gain)) {
-    out.failure = "the pattern does not fit better than the same marker turned";
-  } else {
-    out.ok = true;
-  }
+  out.ok = true;
   return out;
 }
 

@@ -301,16 +301,24 @@ struct BodyTracker::Impl {
           [](const RefineCandidate& a, const RefineCandidate& b) { return a.side > b.side; });
       candidates.resize(largest);
     }
+    // Refined, each corner within `reach` px of its projection.
+    auto refined_within = [](const CornerRefinementResult& r, const RefineCandidate& c,
+                             double reach) {
+      if (r.status != MarkerStatus::kRefined) return false;
+      for (int k = 0; k < 4; ++k) {
+        if ((r.corners_px[k] - c.px[k]).norm() > reach) return false;
+      }
+      return true;
+    };
     pattern_candidates.clear();
     for (size_t i = 0; i < candidates.size(); ++i) {
       if (static_cast<int>(found->size() + candidates.size() - i) < need) break;
       const RefineCandidate& c = candidates[i];
       const CornerRefinementResult r =
           RefineMarkerCorners(gray, c.px, edge, undistorter, &workspace);
-      double shift = 0;
-      for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
-      if (r.status != MarkerStatus::kRefined ||
-          shift > std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * c.side)) {
+      if (!refined_within(
+              r, c,
+              std::max(o.max_refinement_shift_px, o.max_refinement_shift_fraction * c.side))) {
         if (patterns && c.side <= o.template_max_side_px) pattern_candidates.push_back(i);
         continue;
       }
@@ -331,9 +339,7 @@ struct BodyTracker::Impl {
       // so it may lie that far from the projection.
       const double radius = o.template_max_shift_fraction * c.side + K.fx * reach_m / c.depth;
       const CornerRefinementResult r = FromPattern(c, radius);
-      double shift = 0;
-      for (int k = 0; k < 4; ++k) shift = std::max(shift, (r.corners_px[k] - c.px[k]).norm());
-      if (r.status != MarkerStatus::kRefined || shift > radius + o.max_refinement_shift_px) {
+      if (!refined_within(r, c, radius + o.max_refinement_shift_px)) {
         ++misses;
         continue;
       }
