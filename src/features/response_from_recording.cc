@@ -8,10 +8,10 @@
 #include <optional>
 #include <thread>
 
-#include <opencv2/aruco.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
+#include "features/marker_cells.h"
 #include "features/sharpening.h"
 #include "util/check.h"
 #include "util/string_util.h"
@@ -19,15 +19,9 @@
 namespace arpos {
 namespace {
 
-// The detector's dictionary (a name the detector options checked) and the
-// cells across one of its markers, black border included.
-cv::Ptr<cv::aruco::Dictionary> DictionaryOf(const MarkerDetectorOptions& detector) {
-  const int dict_id = ArucoDictionaryId(detector.dictionary);
-  ARPOS_CHECK(dict_id >= 0, "unknown dictionary " << detector.dictionary);
-  return cv::aruco::getPredefinedDictionary(dict_id);
-}
+// The cells across one of the detector's markers, black border included.
 int CellsPerSide(const MarkerDetectorOptions& detector) {
-  return DictionaryOf(detector)->markerSize + 2 * detector.edge.border_bits;
+  return MarkerCells(detector.dictionary, detector.edge.border_bits).cells_per_side();
 }
 
 }  // namespace
@@ -40,22 +34,12 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
   out.response = fallback;
   PixelUndistorter undistorter;
   if (detector.intrinsics.has_value()) undistorter = PixelUndistorter(*detector.intrinsics);
-  const cv::Ptr<cv::aruco::Dictionary> dictionary = DictionaryOf(detector);
+  MarkerCells bits(detector.dictionary, detector.edge.border_bits);
   CellEdgeOptions cell_options;
-  cell_options.marker_bits = dictionary->markerSize;
+  cell_options.marker_bits = bits.cells_per_side() - 2 * detector.edge.border_bits;
   cell_options.border_bits = detector.edge.border_bits;
   cell_options.quiet_zone_cells = detector.edge.quiet_zone_cells;
-  const int cells = CellsPerSide(detector);
-  std::map<int, cv::Mat> bits;
-  auto bits_of = [&](int id) -> const cv::Mat& {
-    auto it = bits.find(id);
-    if (it == bits.end()) {
-      cv::Mat m;
-      cv::aruco::drawMarker(dictionary, id, cells, m, cell_options.border_bits);
-      it = bits.emplace(id, m).first;
-    }
-    return it->second;
-  };
+  const int cells = bits.cells_per_side();
 
   EdgeRefinementOptions edge = detector.edge;
   EdgeRefinementWorkspace workspace;
@@ -125,7 +109,7 @@ RecordingResponse EstimateResponseFromFrames(const std::vector<ResponseFrame>& f
             RefineMarkerCorners(f.gray, m.detected_corners_px, edge, undistorter, &workspace);
         if (r.status != MarkerStatus::kRefined) continue;
         std::optional<MarkerCellEdges> edges = PrepareMarkerCellEdges(
-            f.gray, r.corners_px, bits_of(m.id), r.blur_sigma_px, undistorter, cell_options);
+            f.gray, r.corners_px, bits.Of(m.id), r.blur_sigma_px, undistorter, cell_options);
         if (!edges) continue;
         markers.push_back(std::move(*edges));
         used = true;

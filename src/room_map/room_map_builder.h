@@ -258,6 +258,9 @@ struct RoomMapBuildReport {
   int frames_posed_by_keypoints = 0;
   int marker_views = 0;
   int ambiguous_marker_views = 0;  ///< single-view poses rejected (ambiguous / depth mismatch)
+  /// Views read whose edge lines could not be fitted (motion blur, defocus,
+  /// cells of a pixel or two): not used, counted apart from marker_views.
+  int unrefined_marker_views = 0;
   std::vector<int> unconnected_markers;  ///< seen but not linked to the origin: not in the map
   std::vector<int> sparse_markers;       ///< seen in too few views: not in the map
   int landmark_candidates = 0;

@@ -8,11 +8,11 @@
 #include <unordered_set>
 
 #include <Eigen/Dense>
-#include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "features/edge_refinement.h"
+#include "features/marker_cells.h"
 #include "features/marker_template.h"
 #include "geometry/cube_grid.h"
 #include "geometry/so3.h"
@@ -150,8 +150,7 @@ struct BodyTracker::Impl {
   PixelUndistorter undistorter;
   EdgeRefinementWorkspace workspace;
   // Stickers located by their whole pattern (RefineAtPose).
-  cv::Ptr<cv::aruco::Dictionary> dictionary;
-  std::map<int, cv::Mat> sticker_cells;
+  std::optional<MarkerCells> sticker_cells;
   MarkerTemplateOptions template_options;
   MarkerTemplateCache template_cache;
   std::vector<MarkerObservation> scratch;
@@ -352,16 +351,10 @@ struct BodyTracker::Impl {
   // reach), located by its whole pattern from its projected corners.
   CornerRefinementResult FromPattern(const RefineCandidate& c, double search_radius_px) {
     CornerRefinementResult r;
-    auto cells = sticker_cells.find(c.id);
-    if (cells == sticker_cells.end()) {
-      cv::Mat drawn;
-      cv::aruco::drawMarker(dictionary, c.id, edge.marker_bits + 2 * edge.border_bits, drawn,
-                            edge.border_bits);
-      cells = sticker_cells.emplace(c.id, drawn).first;
-    }
+    const cv::Mat& cells = sticker_cells->Of(c.id);
     template_options.search_radius_px = search_radius_px;
     const MarkerTemplateResult t =
-        FitMarkerTemplate(gray, cells->second, c.px, template_options, &template_cache);
+        FitMarkerTemplate(gray, cells, c.px, template_options, &template_cache);
     if (!t.ok) {
       r.failure = t.failure;
       return r;
@@ -502,8 +495,7 @@ BodyTracker::BodyTracker(const TriangleMesh& model, std::map<int, Rigid3d> model
   m.coarse = std::make_unique<MarkerDetector>(coarse);
   m.edge = options_.detector.edge;
   m.edge.marker_bits = m.detector->marker_bits();
-  m.dictionary =
-      cv::aruco::getPredefinedDictionary(ArucoDictionaryId(options_.detector.dictionary));
+  m.sticker_cells.emplace(options_.detector.dictionary, m.edge.border_bits);
   m.template_options.response = m.edge.response;
   m.template_options.quiet_zone_cells = m.edge.quiet_zone_cells;
   m.undistorter = PixelUndistorter(intrinsics);

@@ -12,8 +12,10 @@
 #include <opencv2/aruco.hpp>
 
 #include "features/edge_refinement.h"
+#include "features/marker_cells.h"
 #include "features/marker_render.h"
 #include "features/marker_template.h"
+#include "util/check.h"
 
 namespace arpos::testing {
 namespace {
@@ -194,6 +196,39 @@ TEST(MarkerTemplate, StatesWhyOnInputItCannotUse) {
   // A flat grey patch: no contrast.
   const MarkerTemplateResult flat = FitMarkerTemplate(gray, cells, corners);
   EXPECT_FALSE(flat.ok);
+}
+
+// The printed cells both the pattern fit and the response estimate read:
+// each marker's bits as the dictionary stores them, inside a black border
+// of the asked width; an id beyond the dictionary gives nothing to draw.
+TEST(MarkerCells, AreTheDictionaryBitsInsideTheirBorder) {
+  for (const int border : {1, 2}) {
+    MarkerCells book("DICT_5X5_100", border);
+    ASSERT_EQ(book.cells_per_side(), 5 + 2 * border);
+    const cv::Ptr<cv::aruco::Dictionary> dict =
+        cv::aruco::getPredefinedDictionary(cv::aruco::DICT_5X5_100);
+    for (const int id : {0, 17, 99}) {
+      const cv::Mat& cells = book.Of(id);
+      ASSERT_EQ(cells.type(), CV_8UC1);
+      ASSERT_EQ(cells.rows, 5 + 2 * border);
+      ASSERT_EQ(cells.cols, 5 + 2 * border);
+      const cv::Mat bits =
+          cv::aruco::Dictionary::getBitsFromByteList(dict->bytesList.rowRange(id, id + 1), 5);
+      int wrong = 0;
+      for (int y = 0; y < cells.rows; ++y) {
+        for (int x = 0; x < cells.cols; ++x) {
+          const bool inner = y >= border && x >= border && y < border + 5 && x < border + 5;
+          const int want = inner && bits.at<uchar>(y - border, x - border) ? 255 : 0;
+          wrong += cells.at<uchar>(y, x) != want;
+        }
+      }
+      EXPECT_EQ(wrong, 0) << "id " << id << ", border " << border;
+      EXPECT_EQ(book.Of(id).data, cells.data) << "drawn once";
+    }
+    EXPECT_TRUE(book.Of(100).empty());
+    EXPECT_TRUE(book.Of(-1).empty());
+  }
+  EXPECT_THROW(MarkerCells("DICT_NOT_ONE", 1), Error);
 }
 
 }  // namespace

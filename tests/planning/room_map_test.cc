@@ -5,6 +5,7 @@
 #include <random>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "planning/planning_test_util.h"
@@ -380,6 +381,59 @@ TEST(RoomMap, CorruptFrameErrorNamesTheFile) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find(broken.filename().string()), std::string::npos) << e.what();
   }
+}
+
+// Room-marker views ArUco reads whose edges cannot be fitted (a hand moving
+// the camera during the exposure) are counted apart from the views used, and
+// when they are as many, the plan says why and what to record; a sharp walk
+// says nothing of the kind.
+TEST(RoomMap, BlurredMarkerViewsAreCountedAndToldWhatToRecord) {
+  const auto& c = GetSmallCase();
+  const RoomMapBuildResult& sharp = GetSmallCaseMap();
+  auto warned = [](const RoomMapBuildReport& r) {
+    for (const std::string& w : r.warnings) {
+      if (w.find("edges could not be fitted") != std::string::npos &&
+          w.find("more slowly") != std::string::npos) {
+        return true;
+      }
+    }
+    return false;
+  };
+  EXPECT_FALSE(warned(sharp.report)) << sharp.report.ToText();
+  EXPECT_LT(2 * sharp.report.unrefined_marker_views, sharp.report.marker_views)
+      << sharp.report.ToText();
+
+  TempDir dir("arpos_planning_blurred");
+  const fs::path case_copy = dir.path() / "case";
+  fs::create_directories(case_copy);
+  fs::copy(c.root / "case.yaml", case_copy / "case.yaml");
+  fs::copy(c.folder.room_dir, case_copy / "room", fs::copy_options::recursive);
+  const Sequence room = Sequence::Open(case_copy / "room");
+  // Every frame smeared along the image diagonal over 7 px, as a hand-held
+  // camera turning during the exposure smears it (in linear light, then
+  // the sRGB curve again).
+  const cv::Mat smear = cv::Mat::eye(7, 7, CV_32F) / 7;
+  for (size_t i = 0; i < room.size(); ++i) {
+    const std::string path = room.color_path(i).string();
+    cv::Mat bgr = cv::imread(path, cv::IMREAD_COLOR), linear;
+    ASSERT_FALSE(bgr.empty()) << path;
+    bgr.convertTo(linear, CV_32F, 1.0 / 255);
+    cv::pow(linear, 2.2, linear);
+    cv::filter2D(linear, linear, -1, smear);
+    cv::pow(linear, 1 / 2.2, linear);
+    linear.convertTo(bgr, CV_8U, 255);
+    ASSERT_TRUE(cv::imwrite(path, bgr)) << path;
+  }
+  const RoomMapBuildResult blurred =
+      BuildRoomMap(Sequence::Open(case_copy / "room"), c.folder.config,
+                   MakeRoomMapBuildOptions(c.folder, RoomMapStageOptions()));
+  const RoomMapBuildReport& r = blurred.report;
+  EXPECT_GE(r.unrefined_marker_views, 5) << r.ToText();
+  EXPECT_GE(2 * r.unrefined_marker_views, r.marker_views + r.unrefined_marker_views) << r.ToText();
+  EXPECT_LT(r.marker_views, sharp.report.marker_views) << r.ToText();
+  EXPECT_TRUE(warned(r)) << r.ToText();
+  EXPECT_NE(r.ToText().find("more read whose edges could not be fitted"), std::string::npos)
+      << r.ToText();
 }
 
 TEST(RoomMap, PlanStageStoresTheMapAndCreatesThePlanOnce) {
