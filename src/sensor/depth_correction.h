@@ -90,6 +90,11 @@ struct DepthCorrectionFit {
   /// the correction predicts readings it was not fitted to.
   bool cross_validated = false;
   double cross_validated_gain = 0;
+  /// The same gain of the full model against the scale alone; at most
+  /// the gain a correction needs (0.025), the field is left out and the
+  /// scale alone fitted (field_left_out).
+  double field_gain = 0;
+  bool field_left_out = false;
   /// The readings' noise relative to their sigma_m, as the readings inside
   /// the markers spread around a first fit (robust; clamped to 0.2-3). The
   /// fit is made at that noise when it is below 1/1.5 (a sensor clearly
@@ -103,7 +108,9 @@ struct DepthCorrectionFit {
 /// spread over depth and either the normalised RMS drops by at least 15 %
 /// or the model fitted to each half of the groups (by `split`) lowers the
 /// other half's squared normalised residual by more than 0.025 per
-/// effective reading (a group counting as at most 4).
+/// effective reading (a group counting as at most 4). The field is kept
+/// only when it predicts the other half so much better than the scale
+/// alone (DepthCorrectionFit::field_gain).
 DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& samples,
                                       const CameraIntrinsics& intrinsics);
 
