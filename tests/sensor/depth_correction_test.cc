@@ -112,8 +112,9 @@ TEST(DepthCorrection, AScaleErrorIsRemoved) {
 
 // A scale error alone: the field fitted with it predicts the other views no
 // better than the scale alone, and is left out (a field made of the views'
-// noise, removed from far readings as z^2, bent a simulated room map by
-// centimetres); a true field beside a scale error is kept.
+// noise, removed from far readings as z^2, moved a simulated room map's
+// markers near the couch by up to 2.3 mm); a true field beside a scale
+// error is kept.
 TEST(DepthCorrection, AFieldIsKeptOnlyWhereItPredictsBeyondTheScale) {
   const CameraIntrinsics k = Xtion();
   int left_out = 0;
