@@ -362,13 +362,19 @@ TEST(RoomMap, OriginNeverSeenIsAClearError) {
   }
 }
 
-TEST(RoomMap, CorruptFrameErrorNamesTheFile) {
-  const auto& c = GetSmallCase();
-  TempDir dir("arpos_planning_corrupt");
-  const fs::path case_copy = dir.path() / "case";
+// A copy of the small case's case.yaml and room/ in `dir`/case, to alter.
+fs::path CopyRoom(const testing::SmallCase& c, const fs::path& dir) {
+  const fs::path case_copy = dir / "case";
   fs::create_directories(case_copy);
   fs::copy(c.root / "case.yaml", case_copy / "case.yaml");
   fs::copy(c.folder.room_dir, case_copy / "room", fs::copy_options::recursive);
+  return case_copy;
+}
+
+TEST(RoomMap, CorruptFrameErrorNamesTheFile) {
+  const auto& c = GetSmallCase();
+  TempDir dir("arpos_planning_corrupt");
+  const fs::path case_copy = CopyRoom(c, dir.path());
   const Sequence room = Sequence::Open(case_copy / "room");
   const fs::path broken = room.color_path(room.size() / 2);
   {
@@ -404,10 +410,7 @@ TEST(RoomMap, BlurredMarkerViewsAreCountedAndToldWhatToRecord) {
       << sharp.report.ToText();
 
   TempDir dir("arpos_planning_blurred");
-  const fs::path case_copy = dir.path() / "case";
-  fs::create_directories(case_copy);
-  fs::copy(c.root / "case.yaml", case_copy / "case.yaml");
-  fs::copy(c.folder.room_dir, case_copy / "room", fs::copy_options::recursive);
+  const fs::path case_copy = CopyRoom(c, dir.path());
   const Sequence room = Sequence::Open(case_copy / "room");
   // Every frame smeared along the image diagonal over 7 px, as a hand-held
   // camera turning during the exposure smears it (in linear light, then
