@@ -2078,10 +2078,8 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
   if (report.unrefined_marker_views >= 5 && 2 * report.unrefined_marker_views >= views_read) {
     report.warnings.push_back(
         StringPrintf("%d of %d room-marker views read could not be used: their edges could not be "
-                     "fitted (motion "
-                     "blur, defocus, or cells of a pixel or two); record the room again moving the "
-                     "camera more slowly, "
-                     "with the markers seen closer",
+                     "fitted (motion blur, defocus, or cells of a pixel or two); record the room "
+                     "again moving the camera more slowly, with the markers seen closer",
                      report.unrefined_marker_views, views_read));
   }
   // A map that places only a small part of the room recording (the origin

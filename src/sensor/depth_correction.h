@@ -92,7 +92,8 @@ struct DepthCorrectionFit {
   double cross_validated_gain = 0;
   /// The same gain of the full model against the scale alone; at most
   /// the gain a correction needs (0.025), the field is left out and the
-  /// scale alone fitted (field_left_out).
+  /// scale alone fitted (field_left_out), cross_validated_gain then being
+  /// the scale's.
   double field_gain = 0;
   bool field_left_out = false;
   /// The readings' noise relative to their sigma_m, as the readings inside
