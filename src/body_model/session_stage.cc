@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include <opencv2/imgproc.hpp>
@@ -217,6 +218,7 @@ std::string SessionStageResult::Summary() const {
   if (surface_motion.frames > 0) out << SurfaceMotionText() << "\n";
   if (!sticker_motion.stickers.empty())
     out << "breathing stickers: " << sticker_motion.Describe() << "\n";
+  if (layout_scale.views > 0 || !layout_scale.why_not.empty()) out << layout_scale.ToText() << "\n";
   if (sticker_reading_distance_m > 0) {
     out << StringPrintf("stickers readable up to %.2f m from this camera (face-on)\n", sticker_reading_distance_m);
   }
@@ -1044,6 +1046,30 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
       // (5 cm and more is not breathing but a patient who moved: the
       // store keeps motions below that.)
       if (motion > 0 && motion < 0.05) result.sticker_motion_m[m.marker_id] = motion;
+    }
+  }
+  // 6b. The layout's scale against the stickers' printed size
+  //     (layout_scale.h): the cameras of step 4 sit off along their views by
+  //     what the depth's error left, and the layout they place can come out
+  //     a little too large or small. The still stickers' corners in every
+  //     frame that sees them, each camera free, say by how much; only what
+  //     exceeds the bias of the stickers' size as read is removed.
+  if (options.layout_scale_from_sticker_size) {
+    std::vector<BodyScanView> seen;
+    for (const ScanFrame& f : frames) {
+      if (!f.view.markers.empty()) seen.push_back(f.view);
+    }
+    std::set<int> moving;
+    for (const auto& [id, motion] : result.sticker_motion_m) moving.insert(id);
+    LayoutScaleOptions scale_options;
+    scale_options.marker_size_m = sticker_size;
+    const double widening_px = response.estimated ? response.estimate.widening_px : -1.0;
+    result.layout_scale = EstimateLayoutScale(seen, result.model_from_markers, moving, camera,
+                                              widening_px, scale_options);
+    if (result.layout_scale.ok && result.layout_scale.scale != 1.0) {
+      ScaleLayout(result.layout_scale.scale, &result.model_from_markers);
+      ScaleLayout(result.layout_scale.scale, &result.marker_map);
+      ScaleLayout(result.layout_scale.scale, &surface_views_map);
     }
   }
   // Which way the moving stickers moved, from their corners in the views

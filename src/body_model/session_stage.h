@@ -45,6 +45,7 @@
 #include <vector>
 
 #include "body_model/body_marker_map.h"
+#include "body_model/layout_scale.h"
 #include "body_model/sticker_motion.h"
 #include "body_model/surface_motion.h"
 #include "controllers/controller.h"
@@ -96,6 +97,10 @@ struct SessionStageOptions {
   /// Then the room offset again from every room-localised frame registered
   /// to the reconstruction (BuildSession, step 5).
   bool room_offset_from_surface = true;
+  /// The sticker layout scaled to the stickers' printed size, as the still
+  /// stickers' corners in the scan's images say (layout_scale.h; after the
+  /// alignment, step 6b).
+  bool layout_scale_from_sticker_size = true;
   /// Each frame's offset in that mean weighs 1 / (s^2 + floor^2), s the
   /// localiser's 1-sigma error of the frame at the stickers (its position
   /// and rotation sigmas carried there), the floor (mm) standing for what
@@ -239,6 +244,8 @@ struct SessionStageResult {
   /// others along their normals), and the measurement's summary.
   std::map<int, Eigen::Vector3d> sticker_motion_direction;
   StickerMotion sticker_motion;
+  /// The sticker layout's scale against the stickers' printed size (step 6b).
+  LayoutScaleEstimate layout_scale;
   /// What the user should know (a weakly placed scan, stickers too small for
   /// the tracking distance), with what to do.
   std::vector<std::string> warnings;
