@@ -3,8 +3,11 @@
 #include <opencv2/calib3d.hpp>
 
 #include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
 #include <functional>
+#include <limits>
 
 #include "features/marker_pose.h"
 #include "util/string_util.h"
@@ -121,18 +124,15 @@ std::string LayoutScaleOptions::Validate() const {
 std::string LayoutScaleEstimate::ToText() const {
   if (!ok) return "sticker layout's scale not checked against the stickers' size (" + why_not + ")";
   const std::string measured_text =
-      StringPrintf("%+.3f %% +- %.3f %% from %d view(s) of %d still sticker(s)",
-                   100 * (measured - 1), 100 * standard_error, views, stickers);
+      StringPrintf("%+.3f %% +- %.3f %% from %d view(s) of %d still sticker(s), %.2f s",
+                   100 * (measured - 1), 100 * standard_error, views, stickers, seconds);
   if (scale == 1.0) {
-    return "sticker layout kept as the cameras placed it: the stickers' printed size agrees with "
-           "it within what "
-           "their size as read can tell (" +
-           measured_text + ")";
+    const std::string kept =
+        "sticker layout kept as the cameras placed it: the stickers' printed size agrees";
+    return kept + " with it within what their size as read can tell (" + measured_text + ")";
   }
-  return StringPrintf(
-             "sticker layout scaled by %+.3f %%: the stickers' printed size disagrees with it (",
-             100 * (scale - 1)) +
-         measured_text + ")";
+  const std::string scaled = StringPrintf("sticker layout scaled by %+.3f %%", 100 * (scale - 1));
+  return scaled + ": the stickers' printed size disagrees with it (" + measured_text + ")";
 }
 
 LayoutScaleEstimate EstimateLayoutScale(const std::vector<BodyScanView>& views,
@@ -178,10 +178,22 @@ LayoutScaleEstimate EstimateLayoutScale(const std::vector<BodyScanView>& views,
                                options.min_stickers_per_view, options.min_views);
     return out;
   }
+  const auto start = std::chrono::steady_clock::now();
   const LayoutFit fit(frame_from_marker, intrinsics, options);
   const double lo = 1 - options.max_change, hi = 1 + options.max_change;
   const double tolerance = 1e-6;
-  for (LayoutView& v : used) fit.Cost(&v, 1.0);  // each camera solved once at the layout as mapped
+  // Each camera solved once at the layout as mapped; a view no pose
+  // explains is left out.
+  used.erase(std::remove_if(used.begin(), used.end(),
+                            [&](LayoutView& v) { return !std::isfinite(fit.Cost(&v, 1.0)); }),
+             used.end());
+  if (static_cast<int>(used.size()) < options.min_views) {
+    out.why_not = StringPrintf("%zu of %d view(s) gave a camera pose, %d needed", used.size(),
+                               out.views, options.min_views);
+    out.views = static_cast<int>(used.size());
+    return out;
+  }
+  out.views = static_cast<int>(used.size());
   out.measured = GoldenMinimum(
       [&](double s) {
         double total = 0;
@@ -210,6 +222,7 @@ LayoutScaleEstimate EstimateLayoutScale(const std::vector<BodyScanView>& views,
   const double beyond = std::abs(out.measured - 1) - options.size_bias - out.standard_error;
   out.scale = beyond > 0 ? 1 + std::copysign(beyond, out.measured - 1) : 1.0;
   out.ok = true;
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
 }
 

@@ -82,6 +82,7 @@ struct LayoutScaleEstimate {
   double standard_error = 0;
   int views = 0;
   int stickers = 0;     ///< still stickers seen in those views
+  double seconds = 0;   ///< time the estimate took
   std::string why_not;  ///< when !ok
 
   std::string ToText() const;
