@@ -15,6 +15,17 @@
 namespace arpos {
 namespace {
 
+// The positions `position(item)` of `items` scaled by `scale` about their
+// centroid.
+template <typename Items, typename Position>
+void ScaleAboutCentroid(double scale, Items* items, Position position) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (auto& item : *items) centre += position(item);
+  if (items->empty()) return;
+  centre /= static_cast<double>(items->size());
+  for (auto& item : *items) position(item) = centre + scale * (position(item) - centre);
+}
+
 // One view's still stickers: their corners and the camera as last solved.
 struct LayoutView {
   std::vector<int> ids;
@@ -100,12 +111,6 @@ double GoldenMinimum(const std::function<double(double)>& f, double lo, double h
     }
   }
   return (a + b) / 2;
-}
-
-Eigen::Vector3d CentreOf(const std::vector<Eigen::Vector3d>& points) {
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (const auto& p : points) centre += p;
-  return points.empty() ? centre : Eigen::Vector3d(centre / static_cast<double>(points.size()));
 }
 
 }  // namespace
@@ -227,19 +232,14 @@ LayoutScaleEstimate EstimateLayoutScale(const std::vector<BodyScanView>& views,
 }
 
 void ScaleLayout(double scale, std::map<int, Rigid3d>* frame_from_marker) {
-  std::vector<Eigen::Vector3d> positions;
-  for (const auto& [id, pose] : *frame_from_marker) positions.push_back(pose.translation);
-  const Eigen::Vector3d centre = CentreOf(positions);
-  for (auto& [id, pose] : *frame_from_marker)
-    pose.translation = centre + scale * (pose.translation - centre);
+  ScaleAboutCentroid(scale, frame_from_marker,
+                     [](auto& item) -> Eigen::Vector3d& { return item.second.translation; });
 }
 
 void ScaleLayout(double scale, BodyMarkerMapResult* map) {
-  std::vector<Eigen::Vector3d> positions;
-  for (const auto& m : map->markers) positions.push_back(m.room_from_marker.translation);
-  const Eigen::Vector3d centre = CentreOf(positions);
-  for (auto& m : map->markers)
-    m.room_from_marker.translation = centre + scale * (m.room_from_marker.translation - centre);
+  ScaleAboutCentroid(scale, &map->markers, [](BodyMarkerEstimate& m) -> Eigen::Vector3d& {
+    return m.room_from_marker.translation;
+  });
 }
 
 }  // namespace arpos

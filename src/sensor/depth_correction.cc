@@ -324,13 +324,16 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
   }
   const DepthCorrection none;
   if (std::count(half_a.begin(), half_a.end(), 1) >= 100 && std::count(half_b.begin(), half_b.end(), 1) >= 100) {
+    // A model fitted to each half, scored on the other: the summed chi-square.
+    auto held_out = [&](const DepthCorrection& fitted_to_a, const DepthCorrection& fitted_to_b) {
+      return SharedChiSquare(samples, half_b, group_size, fitted_to_a) +
+             SharedChiSquare(samples, half_a, group_size, fitted_to_b);
+    };
     const DepthCorrection fit_a = FitModel(samples, half_a, intrinsics, fit_noise);
     const DepthCorrection fit_b = FitModel(samples, half_b, intrinsics, fit_noise);
-    out.cross_validated_gain = (SharedChiSquare(samples, half_b, group_size, none) -
-                                SharedChiSquare(samples, half_b, group_size, fit_a) +
-                                SharedChiSquare(samples, half_a, group_size, none) -
-                                SharedChiSquare(samples, half_a, group_size, fit_b)) /
-                               n_eff;
+    const double chi2_none = held_out(none, none);
+    const double chi2_full = held_out(fit_a, fit_b);
+    out.cross_validated_gain = (chi2_none - chi2_full) / n_eff;
     out.cross_validated = true;
     // The field beyond the scale, cross-validated the same way: a field
     // that does not predict the other half's readings better than the
@@ -341,21 +344,13 @@ DepthCorrectionFit FitDepthCorrection(const std::vector<DepthComparison>& sample
     // the couch came 0.01-2.3 mm nearer the truth on 6 of them and 0.1 mm
     // further on one; the 12 whose field predicted more, 0.03-0.20, or
     // that were not corrected, unchanged).
-    const DepthCorrection scale_a = FitModel(samples, half_a, intrinsics, fit_noise, false);
-    const DepthCorrection scale_b = FitModel(samples, half_b, intrinsics, fit_noise, false);
-    out.field_gain = (SharedChiSquare(samples, half_b, group_size, scale_a) -
-                      SharedChiSquare(samples, half_b, group_size, fit_a) +
-                      SharedChiSquare(samples, half_a, group_size, scale_b) -
-                      SharedChiSquare(samples, half_a, group_size, fit_b)) /
-                     n_eff;
+    const double chi2_scale = held_out(FitModel(samples, half_a, intrinsics, fit_noise, false),
+                                       FitModel(samples, half_b, intrinsics, fit_noise, false));
+    out.field_gain = (chi2_scale - chi2_full) / n_eff;
     if (!(out.field_gain > kMinCrossValidatedGain)) {
       c = FitModel(samples, all, intrinsics, fit_noise, false);
       out.field_left_out = true;
-      out.cross_validated_gain = (SharedChiSquare(samples, half_b, group_size, none) -
-                                  SharedChiSquare(samples, half_b, group_size, scale_a) +
-                                  SharedChiSquare(samples, half_a, group_size, none) -
-                                  SharedChiSquare(samples, half_a, group_size, scale_b)) /
-                                 n_eff;
+      out.cross_validated_gain = (chi2_none - chi2_scale) / n_eff;
     }
   }
   sum_sq = 0;
