@@ -2112,10 +2112,6 @@ RoomMapBuildResult BuildRoomMap(const Sequence& sequence, const CaseConfig& conf
     }
     map.surface = BuildRoomSurface(sequence, K, map.depth_correction, depth_cameras, keep,
                                    options.couch_point_in_room, options.surface, &report.surface);
-    if (!map.depth_correction.IsIdentity() && !map.surface.empty()) {
-      report.surface.note = "kept, but tracking leaves it out: the depth needed a correction, and what a "
-                            "correction leaves is not known to the millimetre";
-    }
   }
   const std::string problem = map.Validate();
   ARPOS_CHECK(problem.empty(), "built an inconsistent room map: " << problem);
