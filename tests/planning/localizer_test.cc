@@ -207,13 +207,15 @@ TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
   const auto& [name, dir] = c.folder.tracking.at(0);
   const Sequence seq = Sequence::Open(dir);
   const auto gt = *seq.CameraGroundTruth();
-  auto localise = [&](bool surface, int* ok, int* samples) {
+  auto localise = [&](bool surface, int* ok, int* samples, const RoomMap* with_map = nullptr,
+                      std::optional<bool> with_corrected_depth = std::nullopt) {
     CameraLocalizerOptions options = MakeCameraLocalizerOptions(c.folder.config);
     options.use_markers = false;
     options.use_room_planes = false;
     options.use_room_surface = surface;
+    if (with_corrected_depth) options.room_surface_with_corrected_depth = *with_corrected_depth;
     options.depth_held_tracking = false;  // frames the keypoints alone hold (test below)
-    CameraLocalizer localizer(map, c.folder.config.camera, options);
+    CameraLocalizer localizer(with_map ? *with_map : map, c.folder.config.camera, options);
     double sum = 0;
     *ok = 0;
     *samples = 0;
@@ -236,6 +238,18 @@ TEST(Localizer, TheRoomsSurfaceInDepthHoldsTheCameraOnKeypointOnlyFrames) {
   EXPECT_GT(samples_with, 100 * ok_with);
   EXPECT_GE(ok_with, ok_without);
   EXPECT_LT(with, 0.9 * without);
+
+  // A plan that corrected its depth (here by 0.001 %, too little to move a
+  // pose) keeps the surface in use, by default; the option leaves it out.
+  RoomMap corrected = map;
+  corrected.depth_correction.scale = 1e-5;
+  ASSERT_FALSE(corrected.depth_correction.IsIdentity());
+  int ok_corrected = 0, ok_left_out = 0, samples_corrected = 0, samples_left_out = 0;
+  const double with_corrected = localise(true, &ok_corrected, &samples_corrected, &corrected);
+  localise(true, &ok_left_out, &samples_left_out, &corrected, false);
+  EXPECT_GT(samples_corrected, 100 * ok_corrected);
+  EXPECT_NEAR(with_corrected, with, 0.1);
+  EXPECT_EQ(samples_left_out, 0);
 }
 
 // Takes every room marker but the one the sequence's first frame sees best
