@@ -47,6 +47,7 @@
 #include "body_model/body_marker_map.h"
 #include "body_model/layout_scale.h"
 #include "body_model/sticker_motion.h"
+#include "body_model/sticker_surface.h"
 #include "body_model/surface_motion.h"
 #include "controllers/controller.h"
 #include "geometry/rigid3.h"
@@ -119,6 +120,12 @@ struct SessionStageOptions {
   /// Stickers this camera reads only closer than this (m, face-on) are
   /// reported as a warning: tracking from farther loses the patient.
   double min_sticker_reading_distance_m = 1.2;
+  /// Stickers lie on the skin: one whose centre is farther than this from
+  /// the aligned reference surface (m), beyond three times the breathing
+  /// the session measured at it, is left out of the map while
+  /// `min_stickers` remain, with a warning, and the alignment's status asks
+  /// for a check (sticker_surface.h, BuildSession step 6c).
+  double max_sticker_off_model_m = 0.008;
   /// Breathing: measure which parts of the surface moved during the scan
   /// (surface_motion.h) and refine the alignment once more on the still
   /// parts, when they hold at least `min_still_surface_share` of the
@@ -273,6 +280,9 @@ struct SessionStageResult {
   ScanLandmarks scan_landmarks;
   double alignment_fitness = 0, alignment_rmse_m = 0;
   std::map<int, Rigid3d> model_from_markers;
+  /// Each sticker's centre against the aligned reference surface (step 6c;
+  /// the stickers off it as found, before any was left out).
+  StickerSurfaceCheck sticker_surface;
   /// The mean correction taken off the reconstruction (none when not
   /// applied): the shift of its centre (m) and the rotation (deg).
   Eigen::Vector3d anchor_shift_m = Eigen::Vector3d::Zero();
