@@ -311,6 +311,62 @@ TEST(SessionStage, TheStageRunsWithoutAStoreAndStopsWhenCancelled) {
   EXPECT_EQ(steps.back(), "meshing (Poisson)");
 }
 
+// Stickers against the aligned reference surface (sticker_surface.h): on
+// the sample all lie within 2 mm of it; with the limit set between the
+// third and second farthest, those two are named, left out of the map and
+// the alignment asks for a check; with no sticker within the limit none is
+// left out (too few would remain), and the warning says they were kept.
+TEST(SessionStage, StickersOffTheAlignedModelAreNamedAndLeftOutWhileEnoughRemain) {
+  TempDir dir;
+  const fs::path case_dir = CopySample(dir);
+  const CaseFolder folder = LoadCaseFolder(case_dir);
+  const SessionPlanInputs plan = PlanInputsOf(folder);
+  SessionStageOptions options;
+  options.case_dir = case_dir;
+  const SessionStageResult r = BuildSession(folder, plan, options);
+  ASSERT_GE(r.sticker_surface.off_m.size(), 5u);
+  EXPECT_TRUE(r.sticker_surface.off.empty());
+  EXPECT_EQ(r.alignment_status, "ok");
+  EXPECT_NE(r.Summary().find("stickers on the aligned reference surface: "), std::string::npos)
+      << r.Summary();
+  std::vector<std::pair<double, int>> by_distance;
+  for (const auto& [id, d] : r.sticker_surface.off_m) {
+    EXPECT_LT(d, 0.004) << "sticker " << id;
+    by_distance.emplace_back(d, id);
+  }
+  std::sort(by_distance.rbegin(), by_distance.rend());
+  ASSERT_LT(by_distance[2].first, by_distance[1].first);
+
+  SessionStageOptions two = options;
+  two.max_sticker_off_model_m = 0.5 * (by_distance[1].first + by_distance[2].first);
+  const SessionStageResult t = BuildSession(folder, plan, two);
+  ASSERT_EQ(t.sticker_surface.off.size(), 2u) << t.Summary();
+  for (int k = 0; k < 2; ++k) {
+    const int id = by_distance[k].second;
+    EXPECT_EQ(t.model_from_markers.count(id), 0u) << id;
+    for (const auto& m : t.marker_map.markers) EXPECT_NE(m.marker_id, id);
+    ASSERT_EQ(t.marker_map.rejected.count(id), 1u) << id;
+    EXPECT_NE(t.marker_map.rejected.at(id).find("off the aligned reference surface"),
+              std::string::npos);
+  }
+  EXPECT_EQ(t.model_from_markers.size(), r.model_from_markers.size() - 2);
+  EXPECT_EQ(t.alignment_status, "check: 2 sticker(s) off the aligned model");
+  bool said = false;
+  for (const std::string& w : t.warnings)
+    said |= w.find("(left out of the map)") != std::string::npos;
+  EXPECT_TRUE(said) << t.Summary();
+
+  SessionStageOptions all = options;
+  all.max_sticker_off_model_m = 0;
+  const SessionStageResult a = BuildSession(folder, plan, all);
+  EXPECT_EQ(a.sticker_surface.off.size(), r.sticker_surface.off_m.size());
+  EXPECT_EQ(a.model_from_markers.size(), r.model_from_markers.size());
+  said = false;
+  for (const std::string& w : a.warnings)
+    said |= w.find("(kept: too few would remain)") != std::string::npos;
+  EXPECT_TRUE(said) << a.Summary();
+}
+
 // A room map that lacks the markers the body scan reads (left out of the
 // plan, as a marker seen in too few views of the room is): the stage stops
 // naming the markers it read and those the map holds, and says what to
