@@ -423,6 +423,16 @@ void AuditPage::ShowModels(long long plan_id, long long reconstruction_id, long 
                 .arg(alignment->fitness, 0, 'f', 3)
                 .arg(1000 * alignment->rmse_m, 0, 'f', 2)
                 .arg(alignment->num_inliers);
+  // The session stage's verdict on an automatic alignment ("ok", or what to
+  // check), kept at the end of its options.
+  const std::string status_key = "status: ";
+  if (const size_t at = alignment->options.rfind(status_key); at != std::string::npos) {
+    const std::string status = alignment->options.substr(at + status_key.size());
+    if (status != "ok")
+      *lines << tr("Alignment %1, as the session stage found it: %2.")
+                    .arg(alignment->id.value())
+                    .arg(Q(status));
+  }
 }
 
 void AuditPage::ShowRun(const SessionReport& report, long long run_id) {
@@ -562,6 +572,16 @@ void AuditPage::ShowDetail(QTreeWidgetItem* item) {
                                                                                       : tr(": %1").arg(Q(s.end_reason)));
         }
         if (s.on_unapproved_plan) lines << tr("This session ran on a plan that was not approved.");
+        // The session stage's warnings, as it stored them in the notes.
+        const std::string marker = "; warning: ";
+        for (size_t at = s.notes.find(marker); at != std::string::npos;) {
+          const size_t from = at + marker.size();
+          const size_t next = s.notes.find(marker, from);
+          lines << tr("Warning: %1")
+                       .arg(
+                           Q(s.notes.substr(from, next == std::string::npos ? next : next - from)));
+          at = next;
+        }
         if (report->approval) {
           lines << (report->approval->approved ? tr("Plan approved by %1.").arg(Q(report->approval->approved_by))
                                                : tr("Plan not approved."));

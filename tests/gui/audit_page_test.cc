@@ -162,6 +162,9 @@ TEST_F(AuditPageTest, SelectingARunFiltersTheTableAndPlotsTheRun) {
   ASSERT_TRUE(page_->SelectEntity("session:1"));
   Settle();
   EXPECT_GT(page_->ShownEntries(), shown);
+  // With the session stage's warnings (the sample's scan is placed by 2 frames).
+  EXPECT_TRUE(text->text().contains("Warning: the body scan is placed in the room by 2 frame(s)"))
+      << text->text().toStdString();
   EXPECT_FALSE(plot->isVisible());
   // Back to the whole log.
   ASSERT_TRUE(page_->SelectEntity(""));
