@@ -1,5 +1,4 @@
 #include "body_model/session_stage.h"
-#include "body_model/sticker_surface.h"
 
 #include <algorithm>
 #include <chrono>
@@ -12,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "body_model/rigid_offsets.h"
+#include "body_model/sticker_surface.h"
 #include "features/response_from_recording.h"
 #include "geometry/mesh_io.h"
 #include "geometry/so3.h"
@@ -1155,17 +1155,15 @@ SessionStageResult BuildSession(const CaseFolder& folder, const SessionPlanInput
                                                       1000 * result.sticker_surface.off_m.at(id));
       }
     }
-    result.warnings.push_back(
-        StringPrintf("%zu of %zu sticker(s) lie off the aligned reference surface by more than "
-                     "%.0f mm beyond their "
-                     "breathing: %s; stickers sit on the skin, so the sticker map or the alignment "
-                     "is wrong there (%s): "
-                     "check the alignment (arpos gui, the session's surface against the model) and "
-                     "record the scan again "
-                     "with every sticker seen near and from several sides",
-                     off, mapped, 1000 * options.max_sticker_off_model_m,
-                     result.sticker_surface.DescribeOff().c_str(),
-                     leave_out ? "left out of the map" : "kept: too few would remain"));
+    result.warnings.push_back(StringPrintf(
+        "%zu of %zu sticker(s) lie off the aligned reference surface by more than %.0f mm "
+        "beyond their breathing: %s; stickers sit on the skin, so the sticker map or the "
+        "alignment is wrong there (%s): check the alignment (arpos gui, the session's surface "
+        "against the model) and record the scan again with every sticker seen near and from "
+        "several sides",
+        off, mapped, 1000 * options.max_sticker_off_model_m,
+        result.sticker_surface.DescribeOff().c_str(),
+        leave_out ? "left out of the map" : "kept: too few would remain"));
     const std::string check = "check: " + std::to_string(off) + " sticker(s) off the aligned model";
     result.alignment_status =
         result.alignment_status == "ok" ? check : result.alignment_status + "; " + check;
