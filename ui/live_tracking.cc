@@ -221,7 +221,9 @@ void LiveTracking::Run(LiveRunRequest request) {
           // Said before the first frame: otherwise a therapist sees only
           // `out` and learns why at the end.
           const RoomFrameNote note = DescribeRoomFrame(inputs, request.tolerances);
-          return note.blocks_in ? "\n" + note.text : std::string();
+          const std::string check = DescribeAlignmentCheck(inputs.alignment_status);
+          return (note.blocks_in ? "\n" + note.text : std::string()) +
+                 (check.empty() ? "" : "\n" + check);
         }()));
     std::vector<double> timestamps;
     std::unique_ptr<CameraSource> source;

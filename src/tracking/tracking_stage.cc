@@ -151,6 +151,9 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   in.room_from_model_target = plan->room_from_model_target;
   in.body_marker_map_id = pieces->marker_map;
   in.alignment_id = pieces->alignment.id;
+  if (const size_t at = pieces->alignment.options.rfind("status: "); at != std::string::npos) {
+    in.alignment_status = pieces->alignment.options.substr(at + 8);
+  }
   const std::optional<BodyMarkerMapRecord> markers = database->GetBodyMarkerMap(pieces->marker_map);
   if (!markers) ARPOS_INPUT_ERROR("body marker map " << pieces->marker_map.value() << " could not be read");
   in.sticker_size_m = markers->marker_size_m;
@@ -219,7 +222,15 @@ std::string TrackSequenceResult::Summary() const {
                         what.c_str(), TrackingLossAdvice(static_cast<TrackingLoss>(worst)));
   }
   if (room_frame.blocks_in) out << "\n  " << room_frame.text;
+  if (!alignment_check.empty()) out << "\n  " << DescribeAlignmentCheck(alignment_check);
   return out.str();
+}
+
+std::string DescribeAlignmentCheck(const std::string& alignment_status) {
+  if (alignment_status.empty() || alignment_status == "ok") return "";
+  return "session's alignment: " + alignment_status +
+         " (the session stage's verdict): look at the alignment before relying on the corrections "
+         "(arpos gui, audit: the session's surface against the model)";
 }
 
 RoomFrameNote DescribeRoomFrame(const TrackingInputs& inputs, const CouchTolerances& tolerances,
@@ -337,6 +348,9 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   }
   result.response_message = response.message;
   result.room_frame = DescribeRoomFrame(inputs, options.tolerances, tracker_options.uncertainty_sigmas);
+  if (!inputs.alignment_status.empty() && inputs.alignment_status != "ok") {
+    result.alignment_check = inputs.alignment_status;
+  }
 
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;

@@ -42,6 +42,9 @@ struct TrackingInputs {
   RoomMapId room_map_id;
   BodyMarkerMapId body_marker_map_id;
   AlignmentId alignment_id;
+  /// The session stage's verdict on that alignment ("ok", or what to check,
+  /// e.g. "check: 3 sticker(s) off the aligned model"; empty: not stored).
+  std::string alignment_status;
   /// The plan's room map with, first among its landmarks, those the
   /// session's body scan placed around the couch (scan_landmarks.h).
   RoomMap room_map;
@@ -195,6 +198,9 @@ struct TrackSequenceResult {
   /// How well the plan's room frame is known and what that does to the
   /// corrections' bounds (in Summary() when it keeps every frame from `in`).
   RoomFrameNote room_frame;
+  /// The session stage's verdict on the alignment tracked against, when it
+  /// is not "ok" (in Summary(), with what to do).
+  std::string alignment_check;
   /// The last frame's correction (what the therapist last saw).
   CouchCorrection last_correction;
   /// room_from_model of every frame with a pose (poses.txt).
@@ -207,6 +213,12 @@ struct TrackSequenceResult {
 /// files, stores the run.
 /// Throws InputError for an unreadable sequence or an unwritable out_dir
 /// (before any work), StoreError when the store fails (files written).
+/// "session's alignment: <status> (the session stage's verdict): look at
+/// ..." for a session stage's verdict on its alignment that is not "ok";
+/// empty for "ok" or none. Under a run's summary and before the first frame
+/// on the positioning screen.
+std::string DescribeAlignmentCheck(const std::string& alignment_status);
+
 TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,
                                   const TrackSequenceOptions& options);
 

@@ -331,6 +331,37 @@ TEST(TrackingStageSummary, TheCommonestLossIsNamedWithWhatToDo) {
       << few.Summary();
 }
 
+// The session stage's verdict on the alignment (the end of its options,
+// "status: ..."): "ok" on the sample; an alignment it asks to check is read
+// as such and said under the run's summary with what to do.
+TEST_F(TrackingStage, TheSessionStagesVerdictOnItsAlignmentIsReadAndSaid) {
+  EXPECT_EQ(SampleInputs().alignment_status, "ok");
+  const fs::path copy = root_ / "verdict.db";
+  fs::copy_file(store_, copy, fs::copy_options::overwrite_existing);
+  {
+    auto database = SqliteDatabase::Open(copy.string());
+    const SessionId session = database->ListSessions().back().id;
+    const std::vector<ReconstructionId> reconstructions = database->ListReconstructionIds(session);
+    ASSERT_FALSE(reconstructions.empty());
+    AlignmentRecord checked = database->ListAlignments(reconstructions.back()).back();
+    checked.parent_alignment_id = checked.id;
+    checked.options = "point-to-plane; status: check: 2 sticker(s) off the aligned model";
+    database->AddAlignment(checked);
+    EXPECT_EQ(LoadTrackingInputs(database.get(), std::nullopt, "case").alignment_status,
+              "check: 2 sticker(s) off the aligned model");
+  }
+  TrackSequenceResult run;
+  run.name = "seq_00";
+  run.frames = run.sequence_frames = run.tracked = 3;
+  EXPECT_EQ(run.Summary().find("session's alignment"), std::string::npos) << run.Summary();
+  run.alignment_check = "check: 2 sticker(s) off the aligned model";
+  EXPECT_NE(run.Summary().find(
+                "session's alignment: check: 2 sticker(s) off the aligned model (the session "
+                "stage's verdict): look at the alignment before relying on the corrections"),
+            std::string::npos)
+      << run.Summary();
+}
+
 TEST_F(TrackingStage, AHintAFewMillimetresOffFindsTheStickersWithoutArUco) {
   const CaseConfig config = LoadCaseConfig(case_ / "case.yaml");
   const Sequence sample = Sequence::Open(case_ / "tracking" / "seq_00");
