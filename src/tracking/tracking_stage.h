@@ -208,17 +208,17 @@ struct TrackSequenceResult {
   std::string Summary() const;
 };
 
-/// Tracks `options.source`, else `options.sequence_dir` (a TUM-layout
-/// sequence with the case's camera `config`), against `inputs`, writes the
-/// files, stores the run.
-/// Throws InputError for an unreadable sequence or an unwritable out_dir
-/// (before any work), StoreError when the store fails (files written).
 /// "session's alignment: <status> (the session stage's verdict): look at
 /// ..." for a session stage's verdict on its alignment that is not "ok";
 /// empty for "ok" or none. Under a run's summary and before the first frame
 /// on the positioning screen.
 std::string DescribeAlignmentCheck(const std::string& alignment_status);
 
+/// Tracks `options.source`, else `options.sequence_dir` (a TUM-layout
+/// sequence with the case's camera `config`), against `inputs`, writes the
+/// files, stores the run.
+/// Throws InputError for an unreadable sequence or an unwritable out_dir
+/// (before any work), StoreError when the store fails (files written).
 TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inputs, const CaseConfig& config,
                                   const TrackSequenceOptions& options);
 
