@@ -424,14 +424,11 @@ void AuditPage::ShowModels(long long plan_id, long long reconstruction_id, long 
                 .arg(1000 * alignment->rmse_m, 0, 'f', 2)
                 .arg(alignment->num_inliers);
   // The session stage's verdict on an automatic alignment ("ok", or what to
-  // check), kept at the end of its options.
-  const std::string status_key = "status: ";
-  if (const size_t at = alignment->options.rfind(status_key); at != std::string::npos) {
-    const std::string status = alignment->options.substr(at + status_key.size());
-    if (status != "ok")
-      *lines << tr("Alignment %1, as the session stage found it: %2.")
-                    .arg(alignment->id.value())
-                    .arg(Q(status));
+  // check).
+  if (const std::string verdict = alignment->StageVerdict(); !verdict.empty() && verdict != "ok") {
+    *lines << tr("Alignment %1, as the session stage found it: %2.")
+                  .arg(alignment->id.value())
+                  .arg(Q(verdict));
   }
 }
 

@@ -1289,7 +1289,8 @@ void StoreSession(Database* database, const CaseFolder& folder, const SessionSta
     icp.fitness = std::clamp(result->alignment_fitness, 0.0, 1.0);
     icp.rmse_m = result->alignment_rmse_m;
     icp.num_inliers = result->alignment_inliers;
-    icp.options = "point-to-plane, reconstruction onto the model surface, gates 30/10/5 mm; status: " + result->alignment_status;
+    icp.options = "point-to-plane, reconstruction onto the model surface, gates 30/10/5 mm; " +
+                  std::string(AlignmentRecord::kStatusKey) + result->alignment_status;
     result->alignment_id = database->AddAlignment(icp);
     database->AppendAudit({AuditId(), 0, actor, "add_alignment",
                             "alignment:" + std::to_string(result->alignment_id.value()),

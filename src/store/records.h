@@ -308,6 +308,17 @@ struct AlignmentRecord {
   std::int64_t num_inliers = 0;
   std::string options;  ///< stage options as YAML, for the record
   std::int64_t created_unix_ms = 0;
+
+  /// The session stage ends an ICP alignment's options with its verdict,
+  /// "status: ok" or what to check; kStatusKey marks it.
+  static constexpr const char* kStatusKey = "status: ";
+  /// That verdict ("ok", "check: 3 sticker(s) off the aligned model", ...),
+  /// empty when the options hold none.
+  std::string StageVerdict() const {
+    const std::string key = kStatusKey;
+    const size_t at = options.rfind(key);
+    return at == std::string::npos ? std::string() : options.substr(at + key.size());
+  }
 };
 
 // ---------------------------------------------------------------- tracking

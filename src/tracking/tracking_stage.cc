@@ -151,11 +151,7 @@ TrackingInputs LoadTrackingInputs(Database* database, std::optional<SessionId> s
   in.room_from_model_target = plan->room_from_model_target;
   in.body_marker_map_id = pieces->marker_map;
   in.alignment_id = pieces->alignment.id;
-  // The session stage's verdict ends the alignment's options (session_stage.cc).
-  const std::string status_key = "status: ";
-  if (const size_t at = pieces->alignment.options.rfind(status_key); at != std::string::npos) {
-    in.alignment_status = pieces->alignment.options.substr(at + status_key.size());
-  }
+  in.alignment_status = pieces->alignment.StageVerdict();
   const std::optional<BodyMarkerMapRecord> markers = database->GetBodyMarkerMap(pieces->marker_map);
   if (!markers) ARPOS_INPUT_ERROR("body marker map " << pieces->marker_map.value() << " could not be read");
   in.sticker_size_m = markers->marker_size_m;
