@@ -816,6 +816,8 @@ struct CameraLocalizer::Impl {
     const std::optional<Mat6> cov = CovarianceOf(r.information);
     if (!cov) return false;
     PoseSigmas(*cov, &out->position_sigma_mm, &out->rotation_sigma_deg);
+    out->covariance = *cov;
+    out->has_covariance = true;
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     // The markers place the frame only when their corners alone hold the
     // pose within the limit (options.markers_alone_must_hold).
@@ -1005,6 +1007,8 @@ struct CameraLocalizer::Impl {
     out->marker_rms_px = r->marker_rms_px;
     out->keypoint_rms_px = r->keypoint_rms_px;
     PoseSigmas(cov, &out->position_sigma_mm, &out->rotation_sigma_deg);
+    out->covariance = cov;
+    out->has_covariance = true;
     if (!(out->position_sigma_mm <= 1000 * options.max_position_sigma_m)) return false;
     out->followed = true;
     out->followed_s = t - anchor.since_map_t;
@@ -1012,6 +1016,18 @@ struct CameraLocalizer::Impl {
     return true;
   }
 };
+
+double LocalizationResult::PointSigmaMm(const Eigen::Vector3d& point_in_camera) const {
+  if (!has_covariance) {
+    return std::hypot(position_sigma_mm,
+                      1000 * RadFromDeg(rotation_sigma_deg) * point_in_camera.norm());
+  }
+  Eigen::Matrix<double, 3, 6> j;
+  j.leftCols<3>() = -Skew(point_in_camera);
+  j.rightCols<3>().setIdentity();
+  const double var = (j * covariance * j.transpose()).trace();
+  return 1000 * std::sqrt(std::max(0.0, var));
+}
 
 CameraLocalizer::CameraLocalizer(RoomMap map, const CameraIntrinsics& intrinsics,
                                  const CameraLocalizerOptions& options)

@@ -368,6 +368,19 @@ struct LocalizationResult {
   /// (infinite: none). Markers place a frame by themselves only when this
   /// is within max_position_sigma_m; otherwise the keypoints must.
   double marker_position_sigma_mm = std::numeric_limits<double>::infinity();
+  /// The pose's full covariance: a left perturbation [rotation; translation]
+  /// of camera_from_room (a point p in the camera moves by -[p]x w + dt),
+  /// the sigmas above its blocks' largest axes; valid when has_covariance.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  bool has_covariance = false;
+  /// 1-sigma error (mm, root of the summed variances of its three axes)
+  /// that this pose gives the room position of a point seen at
+  /// `point_in_camera` (metres): the camera's share of a patient's error
+  /// there. The camera's position and rotation errors largely cancel at
+  /// the points the camera sees, so this is well below
+  /// hypot(position_sigma_mm, rotation_sigma x distance), which treats them
+  /// as independent; that sum is returned when there is no covariance.
+  double PointSigmaMm(const Eigen::Vector3d& point_in_camera) const;
   std::string message;       ///< why, when lost
   LocalizationTimings timings;
   /// The room markers found in this frame (image pixels), for callers that

@@ -400,9 +400,16 @@ Simulator::Simulator(const SimulationOptions& options) : options_(options) {
     std::vector<std::pair<V3, V3>> waypoints = {delta};
     for (int w = 0; w < 3; ++w) waypoints.push_back(RandomPoseDelta(body_rng.Bits(), 0.05, 5.0));
     if (k == 0) {
-      // The first positioning ends close to the target.
-      auto end = RandomPoseDelta(body_rng.Bits(), 0.003, 0.3);
-      waypoints.push_back(end);
+      // The first positioning ends as a therapist's does: the patient
+      // brought within tolerance of the planned pose (within 0.7 mm on each
+      // axis, 0.3 deg) and held there for the last third of the sequence,
+      // so that `in` (and the approach to it) is measured, not only `out`.
+      // A sequence of under a second (the bundled sample's three frames) is
+      // too short for an approach and a hold: it keeps the earlier ending,
+      // close to the plan (within 3 mm on each axis) at its last frame.
+      const bool hold = s.frames >= 30;
+      const auto end = RandomPoseDelta(body_rng.Bits(), hold ? 0.0007 : 0.003, 0.3);
+      for (int w = 0; w < (hold ? 3 : 1); ++w) waypoints.push_back(end);
     }
     delta = waypoints.back();
     s.body = BodyMotion(world_.room_from_model_target, waypoints, duration);

@@ -85,6 +85,60 @@ std::optional<std::pair<size_t, LocalizationResult>> FirstRelocalisedFrame(const
   return std::nullopt;
 }
 
+TEST(Localizer, APosesErrorAtAPointItSeesComesFromItsFullCovariance) {
+  // A camera 1 m from what it sees: its rotation and position errors are
+  // strongly correlated (turning it is nearly the same as shifting it), so
+  // the error at the points it sees is far below the two added as if
+  // independent, and grows away from them. Checked against sampling the
+  // pose's perturbation as the refiner applies it (p' = exp(w) p + dt).
+  const Eigen::Vector3d seen(0.05, -0.02, 1.0);
+  Eigen::Matrix<double, 6, 3> a;  // a turn w comes with the shift that keeps `seen` still
+  a.topRows<3>().setIdentity();
+  a.bottomRows<3>() = Skew(seen);
+  Eigen::Matrix<double, 6, 6> cov =
+      a * (std::pow(RadFromDeg(0.1), 2) * Eigen::Matrix3d::Identity()) * a.transpose();
+  cov.diagonal().array() += 1e-8;  // plus 0.1 mm / 0.006 deg of each alone
+  LocalizationResult r;
+  r.covariance = cov;
+  r.has_covariance = true;
+  r.position_sigma_mm =
+      1000 * std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov.bottomRightCorner<3, 3>())
+                           .eigenvalues()
+                           .maxCoeff());
+  r.rotation_sigma_deg =
+      std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov.topLeftCorner<3, 3>())
+                    .eigenvalues()
+                    .maxCoeff()) *
+      180 / M_PI;
+  const double at_seen = r.PointSigmaMm(seen);
+  const double independent =
+      std::hypot(r.position_sigma_mm, 1000 * RadFromDeg(r.rotation_sigma_deg) * seen.norm());
+  EXPECT_LT(at_seen, 0.25) << "mm";
+  EXPECT_GT(independent, 1.5) << "mm";
+  EXPECT_GT(r.PointSigmaMm(2 * seen), 1.5) << "mm: a point twice as far swings";
+  std::mt19937 rng(7);
+  std::normal_distribution<double> n01;
+  const Eigen::Matrix<double, 6, 6> l = cov.llt().matrixL();
+  for (const Eigen::Vector3d& p :
+       {seen, Eigen::Vector3d(2 * seen), Eigen::Vector3d(0.4, 0.3, 0.6)}) {
+    double sum2 = 0;
+    const int samples = 20000;
+    for (int k = 0; k < samples; ++k) {
+      Eigen::Matrix<double, 6, 1> z;
+      for (int i = 0; i < 6; ++i) z(i) = n01(rng);
+      const Eigen::Matrix<double, 6, 1> xi = l * z;
+      const Eigen::Vector3d moved = QuaternionFromRotationVector(xi.head<3>()) * p + xi.tail<3>();
+      sum2 += (moved - p).squaredNorm();
+    }
+    EXPECT_NEAR(1000 * std::sqrt(sum2 / samples), r.PointSigmaMm(p),
+                0.03 * r.PointSigmaMm(p) + 0.01)
+        << p.transpose();
+  }
+  // Without a covariance: the sum as if independent.
+  r.has_covariance = false;
+  EXPECT_NEAR(r.PointSigmaMm(seen), independent, 1e-9);
+}
+
 TEST(Localizer, TrackingFramesWithinTolerance) {
   const auto& c = GetSmallCase();
   const RoomMap& map = GetSmallCaseMap().map;

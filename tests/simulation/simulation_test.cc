@@ -678,6 +678,38 @@ std::vector<double> DepthStepsMm(const cv::Mat& depth_mm, const std::vector<int>
 // have the same spacing of distinct depth values. Measured: real 2 / 3 / 4 /
 // 7 mm at 0.7-0.9 / 0.9-1.1 / 1.1-1.3 / 1.4-1.6 m, simulated the same.
 // Without disparity quantisation the simulated steps would all be 1 mm.
+TEST(Tracking, TheFirstPositioningEndsWithinToleranceAndIsHeldThere) {
+  // A therapist's positioning ends with the patient at the planned pose:
+  // the first sequence's last third within 2 mm / 1 deg of the target (so
+  // `in` is measured, not only `out`), its start well outside; over seeds.
+  for (const uint64_t seed : {5u, 41u, 97u}) {
+    SimulationOptions o = SmallOptions();
+    o.seed = seed;
+    o.tracking_frames = 150;
+    o.tracking_sequences = 2;
+    const Simulator sim(o);
+    const Rigid3d& target = sim.world().room_from_model_target;
+    auto offset = [&](int sequence, int frame, double* angle_deg) {
+      const SequencePlan& plan = sim.sequences()[sequence];
+      const Rigid3d pose = plan.body.RoomFromModel(plan.time(frame));
+      *angle_deg = pose.rotation.angularDistance(target.rotation) * 180 / M_PI;
+      return 1000 * (pose.translation - target.translation).norm();
+    };
+    int first = -1;
+    for (size_t k = 0; k < sim.sequences().size() && first < 0; ++k) {
+      if (sim.sequences()[k].kind == SequenceKind::kTracking) first = static_cast<int>(k);
+    }
+    ASSERT_GE(first, 0);
+    double angle = 0;
+    EXPECT_GT(offset(first, 0, &angle), 5.0) << "seed " << seed;
+    for (int f = 100; f < 150; ++f) {
+      EXPECT_LT(offset(first, f, &angle), 1.25) << "seed " << seed << " frame " << f;
+      EXPECT_LT(angle, 0.31) << "seed " << seed << " frame " << f;
+    }
+    EXPECT_NEAR(offset(first, 100, &angle), offset(first, 149, &angle), 1e-9) << "held still";
+  }
+}
+
 TEST(SensorModel, XtionDepthStepsMatchARealKinectFrame) {
   const fs::path real_path = fs::path(ARPOS_SHARED_DATA_DIR) / "pcl_kinect" / "grabber_sequences" / "tiff" /
                              "frame_20121214T142255.814212_depth.tiff";
