@@ -9,7 +9,8 @@
 # tracking sequence of 150; then arpos run-case (plan, session, tracking,
 # each against the case's ground truth). Prints one line a seed: what was
 # drawn, the exit status, the model pose at scan time and the tracking
-# figures, or the first error. A case that fails is a finding, not skipped.
+# figures (with seq_00's frames reported `in`, truly in and `in` while
+# truly out), or the first error. A case that fails is a finding, not skipped.
 # Environment: BUILD (default build), ARPOS (default BUILD/bin/arpos; point
 # it at a copy with its lib/ beside it when the build is being rebuilt),
 # WORK (default /tmp/arpos_sweep). Cases are kept in WORK and reused when
@@ -50,5 +51,14 @@ for s in "$@"; do
   model=$(grep -o 'model pose at scan time vs body_groundtruth.txt: [0-9.]* mm, [0-9.]* deg' "$n.run.txt" | awk '{print $8, $10}')
   track=$(grep -o 'MTE [0-9.]* mm, MRE [0-9.]* deg ([^)]*), [0-9.]* % lost' "$n.run.txt" | head -1)
   err=$(grep -m1 -E 'error|internal' "$n.run.txt" || true)
-  echo "s$s $p $d room=$rf$extra | $drawn| exit $rc | model ${model:-n/a} (mm, deg) | ${track:-no tracking figures} ${err:+| $err}"
+  # `in` against the truth (seq_00 ends held within tolerance): reported in,
+  # truly in, reported in while truly out (must be 0).
+  ins=""
+  if [ -f "$n.out/seq_00/corrections.csv" ]; then
+    ins=$("$ARPOS" evaluate --corrections "$n.out/seq_00/corrections.csv" \
+        --gt "$n/tracking/seq_00/body_groundtruth.txt" --target "$n/target_pose.txt" 2>/dev/null |
+      awk '/^reported: in/ {r = $3 + 0} /^truly/ {t = $9 + 0} /^reported in while truly out/ {w = $6 + 0}
+           END {if (r != "") printf "in %s, truly in %s, in while out %s", r, t, w}' || true)
+  fi
+  echo "s$s $p $d room=$rf$extra | $drawn| exit $rc | model ${model:-n/a} (mm, deg) | ${track:-no tracking figures} ${ins:+| $ins} ${err:+| $err}"
 done
