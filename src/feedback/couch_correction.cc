@@ -96,13 +96,26 @@ std::string CorrectionsCsvRow(double timestamp_s, const CouchCorrection& c) {
                       Printable(c.rotation_deg, 4), CorrectionStateName(c.state));
 }
 
+std::string SizeAndState(const CouchCorrection& c) {
+  const bool bound = c.uncertainty.translation_mm > 0 || c.uncertainty.rotation_deg > 0;
+  const std::string shift = bound ? StringPrintf("%.1f +-%.1f mm", Printable(c.translation_mm, 1),
+                                                 c.uncertainty.translation_mm)
+                                  : StringPrintf("%.1f mm", Printable(c.translation_mm, 1));
+  const std::string turn = bound ? StringPrintf("%.2f +-%.2f deg", Printable(c.rotation_deg, 2),
+                                                c.uncertainty.rotation_deg)
+                                 : StringPrintf("%.2f deg", Printable(c.rotation_deg, 2));
+  return shift + "  " + turn + "  " +
+         (c.state == CorrectionState::kIn ? "IN TOLERANCE" : "OUT OF TOLERANCE");
+}
+
 std::string DescribeCorrection(const CouchCorrection& c) {
   if (c.state == CorrectionState::kLost) return "patient lost: no correction";
-  return StringPrintf("lat %+.1f  lng %+.1f  vrt %+.1f mm | pitch %+.2f  roll %+.2f  yaw %+.2f deg | %.1f mm %.2f deg %s",
-                      Printable(c.lateral_mm, 1), Printable(c.longitudinal_mm, 1), Printable(c.vertical_mm, 1),
-                      Printable(c.pitch_deg, 2), Printable(c.roll_deg, 2), Printable(c.yaw_deg, 2),
-                      Printable(c.translation_mm, 1), Printable(c.rotation_deg, 2),
-                      c.state == CorrectionState::kIn ? "IN TOLERANCE" : "OUT OF TOLERANCE");
+  return StringPrintf(
+             "lat %+.1f  lng %+.1f  vrt %+.1f mm | pitch %+.2f  roll %+.2f  yaw %+.2f deg | ",
+             Printable(c.lateral_mm, 1), Printable(c.longitudinal_mm, 1),
+             Printable(c.vertical_mm, 1), Printable(c.pitch_deg, 2), Printable(c.roll_deg, 2),
+             Printable(c.yaw_deg, 2)) +
+         SizeAndState(c);
 }
 
 RoomFrameBound BoundOfRoomFrame(double position_sigma_mm, double rotation_sigma_deg,

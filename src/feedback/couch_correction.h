@@ -51,6 +51,12 @@ struct CouchCorrection {
   CorrectionState state = CorrectionState::kLost;
 };
 
+/// The correction's size with the bound its state was decided with, and the
+/// state: "1.0 +-4.5 mm  0.33 +-0.30 deg  OUT OF TOLERANCE" (the bound left
+/// out when there is none), so that a shift within the tolerance that reads
+/// `out` shows why. Not for a lost correction.
+std::string SizeAndState(const CouchCorrection& c);
+
 /// How many sigmas of a pose's uncertainty a correction's bound spans by
 /// default (TrackerOptions::uncertainty_sigmas).
 constexpr double kDefaultUncertaintySigmas = 3.0;

@@ -145,8 +145,7 @@ std::vector<std::string> PanelLines(const CouchCorrection& c, const std::string&
               " mm  VRT " + Signed(c.vertical_mm, 1) + " mm",
           "PITCH " + Signed(c.pitch_deg, 2) + "  ROLL " + Signed(c.roll_deg, 2) + "  YAW " +
               Signed(c.yaw_deg, 2) + " deg",
-          StringPrintf("%.1f mm  %.2f deg  %s", c.translation_mm, c.rotation_deg,
-                       c.state == CorrectionState::kIn ? "IN TOLERANCE" : "OUT OF TOLERANCE")};
+          SizeAndState(c)};
 }
 
 // `text` broken at spaces into lines no wider than `max_width` pixels (a

@@ -98,7 +98,8 @@ class OverlayRenderer {
   /// corner coloured by `correction.state`:
   ///   "LAT +1.2 mm  LNG -0.4 mm  VRT +3.0 mm"
   ///   "PITCH +0.10  ROLL -0.20  YAW +0.05 deg"
-  ///   "3.2 mm  0.23 deg  OUT OF TOLERANCE"   (or IN TOLERANCE)
+  ///   "3.2 +-1.5 mm  0.23 +-0.10 deg  OUT OF TOLERANCE"   (or IN TOLERANCE;
+  ///   the bound the state was decided with, SizeAndState)
   /// with, when the state is lost, dashes and `lost_headline` (e.g.
   /// "CAMERA NOT PLACED IN ROOM"; "PATIENT LOST" when empty) as the third
   /// line; and `caption` (if not empty) at the bottom, wrapped at spaces to

@@ -135,6 +135,27 @@ TEST(CouchCorrection, DescriptionHasNoNegativeZero) {
   EXPECT_NE(text.find("pitch +0.00"), std::string::npos) << text;
 }
 
+// A shift within the tolerance that reads `out` shows why: the bound its
+// state was decided with, beside the size (panel, `arpos track`, OpenIGTLink).
+TEST(CouchCorrection, TheSizeIsShownWithTheBoundItsStateWasDecidedWith) {
+  const Rigid3d target = Target();
+  Rigid3d current = target;
+  current.translation.x() += 0.001;  // 1 mm off: within a 2 mm tolerance on its own
+  const CouchTolerances tol;
+  const CouchCorrection unsure = ComputeCouchCorrection(current, target, {4.5, 0.3}, tol);
+  EXPECT_EQ(unsure.state, CorrectionState::kOut);
+  EXPECT_EQ(SizeAndState(unsure), "1.0 +-4.5 mm  0.00 +-0.30 deg  OUT OF TOLERANCE");
+  const CouchCorrection sure = ComputeCouchCorrection(current, target, {0.5, 0.1}, tol);
+  EXPECT_EQ(sure.state, CorrectionState::kIn);
+  EXPECT_EQ(SizeAndState(sure), "1.0 +-0.5 mm  0.00 +-0.10 deg  IN TOLERANCE");
+  EXPECT_NE(DescribeCorrection(unsure).find("| 1.0 +-4.5 mm  0.00 +-0.30 deg  OUT OF TOLERANCE"),
+            std::string::npos)
+      << DescribeCorrection(unsure);
+  CouchCorrection bare = sure;
+  bare.uncertainty = {};
+  EXPECT_EQ(SizeAndState(bare), "1.0 mm  0.00 deg  IN TOLERANCE") << "no bound, none shown";
+}
+
 TEST(CouchCorrection, CsvRowsFollowTheHeader) {
   EXPECT_EQ(CorrectionsCsvHeader(),
             "timestamp,lateral_mm,longitudinal_mm,vertical_mm,pitch_deg,roll_deg,yaw_deg,translation_mm,rotation_deg,"
