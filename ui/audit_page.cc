@@ -425,7 +425,8 @@ void AuditPage::ShowModels(long long plan_id, long long reconstruction_id, long 
                 .arg(alignment->num_inliers);
   // The session stage's verdict on an automatic alignment ("ok", or what to
   // check).
-  if (const std::string verdict = alignment->StageVerdict(); !verdict.empty() && verdict != "ok") {
+  if (const std::string verdict = alignment->StageVerdict();
+      AlignmentRecord::AsksForCheck(verdict)) {
     *lines << tr("Alignment %1, as the session stage found it: %2.")
                   .arg(alignment->id.value())
                   .arg(Q(verdict));

@@ -1017,11 +1017,13 @@ struct CameraLocalizer::Impl {
   }
 };
 
+double LocalizationResult::SeparateSigmasMm(const Eigen::Vector3d& point_in_camera) const {
+  return std::hypot(position_sigma_mm,
+                    1000 * RadFromDeg(rotation_sigma_deg) * point_in_camera.norm());
+}
+
 double LocalizationResult::PointSigmaMm(const Eigen::Vector3d& point_in_camera) const {
-  if (!has_covariance) {
-    return std::hypot(position_sigma_mm,
-                      1000 * RadFromDeg(rotation_sigma_deg) * point_in_camera.norm());
-  }
+  if (!has_covariance) return SeparateSigmasMm(point_in_camera);
   Eigen::Matrix<double, 3, 6> j;
   j.leftCols<3>() = -Skew(point_in_camera);
   j.rightCols<3>().setIdentity();

@@ -379,8 +379,12 @@ struct LocalizationResult {
   /// there. The camera's position and rotation errors largely cancel at
   /// the points the camera sees, so this is well below
   /// hypot(position_sigma_mm, rotation_sigma x distance), which treats them
-  /// as independent; that sum is returned when there is no covariance.
+  /// as independent (SeparateSigmasMm), which is returned when there is
+  /// no covariance.
   double PointSigmaMm(const Eigen::Vector3d& point_in_camera) const;
+  /// position_sigma_mm and rotation_sigma_deg swinging the point at its
+  /// distance, added as if independent (mm): an upper bound of the above.
+  double SeparateSigmasMm(const Eigen::Vector3d& point_in_camera) const;
   std::string message;       ///< why, when lost
   LocalizationTimings timings;
   /// The room markers found in this frame (image pixels), for callers that

@@ -319,6 +319,10 @@ struct AlignmentRecord {
     const size_t at = options.rfind(key);
     return at == std::string::npos ? std::string() : options.substr(at + key.size());
   }
+  /// Whether a verdict asks for the alignment to be looked at (not "ok", not none).
+  static bool AsksForCheck(const std::string& verdict) {
+    return !verdict.empty() && verdict != "ok";
+  }
 };
 
 // ---------------------------------------------------------------- tracking

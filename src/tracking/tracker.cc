@@ -364,11 +364,8 @@ TrackedFrame Tracker::Process(const RgbdFrame& input) {
     // such frames beyond their bound against 65 (with markers: 7 of 1889,
     // from room frames stated too tightly, against 1).
     const Eigen::Vector3d patient = out.body.camera_from_model.translation;
-    const double camera_mm =
-        out.camera.markers_used > 0
-            ? out.camera.PointSigmaMm(patient)
-            : std::hypot(out.camera.position_sigma_mm,
-                         1000 * out.camera.rotation_sigma_deg / kDegPerRad * patient.norm());
+    const double camera_mm = out.camera.markers_used > 0 ? out.camera.PointSigmaMm(patient)
+                                                         : out.camera.SeparateSigmasMm(patient);
     const double scan_share =
         out.camera.keypoints_used > 0
             ? static_cast<double>(out.camera.scan_keypoints_used) / out.camera.keypoints_used

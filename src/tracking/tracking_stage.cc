@@ -225,7 +225,7 @@ std::string TrackSequenceResult::Summary() const {
 }
 
 std::string DescribeAlignmentCheck(const std::string& alignment_status) {
-  if (alignment_status.empty() || alignment_status == "ok") return "";
+  if (!AlignmentRecord::AsksForCheck(alignment_status)) return "";
   return "session's alignment: " + alignment_status +
          " (the session stage's verdict): look at the alignment before relying on the corrections "
          "(arpos gui, audit: the session's surface against the model)";
@@ -346,9 +346,8 @@ TrackSequenceResult TrackSequence(Database* database, const TrackingInputs& inpu
   }
   result.response_message = response.message;
   result.room_frame = DescribeRoomFrame(inputs, options.tolerances, tracker_options.uncertainty_sigmas);
-  if (!inputs.alignment_status.empty() && inputs.alignment_status != "ok") {
+  if (AlignmentRecord::AsksForCheck(inputs.alignment_status))
     result.alignment_check = inputs.alignment_status;
-  }
 
   tracker_options.camera.detector.edge.response = response.response;
   tracker_options.body.detector.edge.response = response.response;
